@@ -1,0 +1,1 @@
+"""Rod model, linearization, sampled-loop gain design and C header generation (see README)."""

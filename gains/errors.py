@@ -1,0 +1,19 @@
+"""User-facing errors. The CLI prints `str(err)` on one line and exits with `err.exit_code`."""
+
+
+class UserError(Exception):
+    """Bad input or an impossible request: one line for the user, never a traceback."""
+
+    exit_code = 1
+
+
+class ParamError(UserError):
+    """A parameter file or --set override is wrong (unknown/missing key, type, value)."""
+
+    exit_code = 2
+
+
+class DesignRefused(UserError):
+    """The design would not stabilize the sampled loop (or cannot be computed)."""
+
+    exit_code = 3

@@ -1,0 +1,352 @@
+"""Parameter files: load, override, validate, and derive the quantities the rest uses.
+
+A parameter file is TOML with every key of `SCHEMA` present (the default file is
+`default.toml` beside this module). Values are SI unless the key ends in `_deg` or `_hz`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+from typing import Any, Callable
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+from .errors import ParamError
+
+DEFAULT_PARAMS = Path(__file__).with_name("default.toml")
+
+
+@dataclass(frozen=True)
+class Key:
+    kind: type  # int, float, bool or str
+    unit: str
+    check: Callable[[Any], str | None] | None = None  # returns a problem or None
+
+
+def _positive(v):
+    return None if v > 0 else "must be > 0"
+
+
+def _nonneg(v):
+    return None if v >= 0 else "must be >= 0"
+
+
+def _between(lo, hi):
+    def check(v):
+        return None if lo <= v <= hi else f"must be between {lo:g} and {hi:g}"
+
+    return check
+
+
+def _choice(*options):
+    def check(v):
+        return None if v in options else "must be one of " + ", ".join(repr(o) for o in options)
+
+    return check
+
+
+SCHEMA: dict[str, dict[str, Key]] = {
+    "rod": {
+        "edges": Key(int, "-", _between(2, 64)),
+        "length": Key(float, "m", _positive),
+        "width": Key(float, "m", _positive),
+        "thickness": Key(float, "m", _positive),
+        "density": Key(float, "kg/m^3", _positive),
+        "youngs_modulus": Key(float, "Pa", _positive),
+        "damping": Key(float, "N m s/rad", _nonneg),
+        "gravity": Key(float, "m/s^2", _nonneg),
+    },
+    "motor": {
+        "gear_ratio": Key(float, "-", _positive),
+        "torque_constant": Key(float, "N m/A", _positive),
+        "back_emf_constant": Key(float, "V s/rad", _nonneg),
+        "gearbox_efficiency": Key(float, "-", lambda v: None if 0 < v <= 1 else "must be in (0, 1]"),
+        "resistance": Key(float, "ohm", _positive),
+        "rotor_inertia": Key(float, "kg m^2", _nonneg),
+        "viscous_friction": Key(float, "N m s/rad", _nonneg),
+        "design_includes_motor": Key(bool, "-"),
+    },
+    "driver": {
+        "supply_voltage": Key(float, "V", _between(4.5, 36.0)),
+        "current_limit": Key(float, "A", _positive),
+        "max_duty": Key(float, "-", lambda v: None if 0 < v <= 1 else "must be in (0, 1]"),
+        "pwm_frequency_hz": Key(float, "Hz", _between(20000, 100000)),
+    },
+    "encoder": {
+        "counts_per_motor_rev": Key(int, "-", _between(1, 100000)),
+        "rate_bandwidth_hz": Key(float, "Hz", _positive),
+    },
+    "loop": {
+        "rate_hz": Key(float, "Hz", _between(100, 10000)),
+    },
+    "design": {
+        "method": Key(str, "-", _choice("sampled", "continuous")),
+    },
+    "lqr": {
+        "q_angle": Key(float, "1/rad^2", _nonneg),
+        "q_rate": Key(float, "s^2/rad^2", _nonneg),
+        "r_torque": Key(float, "1/(N m)^2", _positive),
+    },
+    "observer": {
+        "process_noise_angle": Key(float, "rad^2/s", _nonneg),
+        "process_noise_rate": Key(float, "rad^2/s^3", _nonneg),
+        "measurement_noise": Key(float, "rad^2 s", _positive),
+    },
+    "swing_up": {
+        "amplitude": Key(float, "N m", _nonneg),
+        "angle_deg": Key(float, "deg", lambda v: None if 0 < v <= 180 else "must be in (0, 180]"),
+        "catch_angle_deg": Key(float, "deg", lambda v: None if 0 < v < 90 else "must be in (0, 90)"),
+    },
+    "safety": {
+        "torque_limit": Key(float, "N m", _positive),
+        "angle_limit_deg": Key(float, "deg", lambda v: None if 0 < v <= 180 else "must be in (0, 180]"),
+        "speed_limit": Key(float, "rad/s", _positive),
+        "heartbeat_timeout": Key(float, "s", _between(0.05, 10.0)),
+    },
+}
+
+
+def _cross_checks(p: dict) -> list[tuple[str, str]]:
+    """Checks that involve more than one key: (key, problem)."""
+    out = []
+    if p["safety"]["angle_limit_deg"] <= p["swing_up"]["catch_angle_deg"]:
+        out.append(("safety.angle_limit_deg", "must exceed swing_up.catch_angle_deg, or every catch trips the limit"))
+    if p["observer"]["process_noise_angle"] == 0 and p["observer"]["process_noise_rate"] == 0:
+        out.append(("observer.process_noise_angle", "and process_noise_rate cannot both be 0"))
+    if p["lqr"]["q_angle"] == 0 and p["lqr"]["q_rate"] == 0:
+        out.append(("lqr.q_angle", "and q_rate cannot both be 0"))
+    if p["swing_up"]["amplitude"] > p["safety"]["torque_limit"]:
+        out.append(("swing_up.amplitude", "must not exceed safety.torque_limit"))
+    try:
+        counts_fraction(p)
+    except ValueError as e:
+        out.append(("encoder.counts_per_motor_rev", str(e)))
+    return out
+
+
+def _coerce(name: str, key: Key, value: Any) -> Any:
+    kind = key.kind
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise ParamError(f"{name}: expected true or false, got {value!r}")
+    elif kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ParamError(f"{name}: expected an integer [{key.unit}], got {value!r}")
+    elif kind is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ParamError(f"{name}: expected a number [{key.unit}], got {value!r}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise ParamError(f"{name}: must be finite, got {value!r}")
+    elif kind is str:
+        if not isinstance(value, str):
+            raise ParamError(f"{name}: expected a string, got {value!r}")
+    if key.check is not None:
+        problem = key.check(value)
+        if problem:
+            raise ParamError(f"{name}: {problem} [{key.unit}], got {value!r}")
+    return value
+
+
+def _parse_override(text: str) -> tuple[str, str, Any]:
+    if "=" not in text:
+        raise ParamError(f"--set {text!r}: expected section.key=value")
+    name, raw = text.split("=", 1)
+    name = name.strip()
+    if name.count(".") != 1:
+        raise ParamError(f"--set {text!r}: expected section.key=value")
+    section, key = name.split(".")
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw.strip()  # bare words are strings: design.method=continuous
+    return section, key, value
+
+
+def load_params(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = ()) -> "Params":
+    """Read a parameter file (default: Table I), apply `section.key=value` overrides, validate."""
+    path = Path(path) if path is not None else DEFAULT_PARAMS
+    try:
+        text = path.read_text()
+    except OSError as e:
+        raise ParamError(f"{path}: cannot read parameter file ({e.strerror or e})") from None
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ParamError(f"{path}: not valid TOML ({e})") from None
+    for o in overrides:
+        section, key, value = _parse_override(o)
+        if section not in SCHEMA or key not in SCHEMA[section]:
+            raise ParamError(f"--set {section}.{key}: unknown key")
+        raw.setdefault(section, {})[key] = value
+    return Params(validate(raw, source=str(path)), source=str(path))
+
+
+def validate(raw: dict, source: str = "parameters") -> dict:
+    for section, table in raw.items():
+        if section not in SCHEMA:
+            raise ParamError(f"{source}: unknown section [{section}]")
+        if not isinstance(table, dict):
+            raise ParamError(f"{source}: {section} must be a table")
+        for key in table:
+            if key not in SCHEMA[section]:
+                raise ParamError(f"{section}.{key}: unknown key")
+    out: dict[str, dict[str, Any]] = {}
+    for section, keys in SCHEMA.items():
+        out[section] = {}
+        for key, spec in keys.items():
+            name = f"{section}.{key}"
+            if key not in raw.get(section, {}):
+                raise ParamError(f"{name}: missing key [{spec.unit}]")
+            out[section][key] = _coerce(name, spec, raw[section][key])
+    for name, problem in _cross_checks(out):
+        raise ParamError(f"{name}: {problem}")
+    return out
+
+
+def counts_fraction(p: dict) -> Fraction:
+    """Encoder counts per output revolution as an exact fraction (979.2 = 4896/5).
+
+    The firmware wraps angles with integer arithmetic on the numerator and denominator,
+    so upright (half a turn, 489.6 counts) is represented without rounding.
+    """
+    cpr = Fraction(p["encoder"]["counts_per_motor_rev"]) * Fraction(str(p["motor"]["gear_ratio"])).limit_denominator(1000)
+    if abs(float(cpr) - p["encoder"]["counts_per_motor_rev"] * p["motor"]["gear_ratio"]) > 1e-9 * float(cpr):
+        raise ValueError("times motor.gear_ratio must be a fraction with denominator <= 1000")
+    if cpr.numerator > 2**20:
+        raise ValueError("times motor.gear_ratio is too many counts per revolution (> 2^20)")
+    return cpr
+
+
+@dataclass(frozen=True)
+class Params:
+    """Validated parameters with derived quantities. `values[section][key]` holds the file's values."""
+
+    values: dict
+    source: str = "parameters"
+
+    def __getitem__(self, section: str) -> dict:
+        return self.values[section]
+
+    # --- derived rod quantities -------------------------------------------------
+    @property
+    def N(self) -> int:
+        return self.values["rod"]["edges"]
+
+    @property
+    def dt(self) -> float:
+        """Control period [s]."""
+        return 1.0 / self.values["loop"]["rate_hz"]
+
+    @property
+    def edge_length(self) -> float:
+        """l = L_tot / N [m]."""
+        return self.values["rod"]["length"] / self.N
+
+    @property
+    def edge_mass(self) -> float:
+        """m = rho w h l [kg]."""
+        r = self.values["rod"]
+        return r["density"] * r["width"] * r["thickness"] * self.edge_length
+
+    @property
+    def EI(self) -> float:
+        """Bending stiffness E w h^3 / 12 [N m^2]."""
+        r = self.values["rod"]
+        return r["youngs_modulus"] * r["width"] * r["thickness"] ** 3 / 12.0
+
+    @property
+    def EA(self) -> float:
+        """Axial stiffness E w h [N]."""
+        r = self.values["rod"]
+        return r["youngs_modulus"] * r["width"] * r["thickness"]
+
+    # --- motor and driver at the output shaft ---------------------------------------
+    @property
+    def base_inertia(self) -> float:
+        """Reflected rotor inertia J_rotor G^2 at the output shaft [kg m^2]."""
+        m = self.values["motor"]
+        return m["rotor_inertia"] * m["gear_ratio"] ** 2
+
+    @property
+    def base_friction(self) -> float:
+        """Viscous friction at the output shaft [N m s/rad]."""
+        return self.values["motor"]["viscous_friction"]
+
+    @property
+    def design_base_inertia(self) -> float:
+        return self.base_inertia if self.values["motor"]["design_includes_motor"] else 0.0
+
+    @property
+    def design_base_friction(self) -> float:
+        return self.base_friction if self.values["motor"]["design_includes_motor"] else 0.0
+
+    @property
+    def kt_out(self) -> float:
+        """Output torque per ampere, eta G k_t [N m/A]."""
+        m = self.values["motor"]
+        return m["gearbox_efficiency"] * m["gear_ratio"] * m["torque_constant"]
+
+    @property
+    def ke_out(self) -> float:
+        """Back-EMF per output rad/s, G k_e [V s/rad]."""
+        m = self.values["motor"]
+        return m["gear_ratio"] * m["back_emf_constant"]
+
+    @property
+    def torque_max(self) -> float:
+        """Usable torque: the smaller of the driver's current limit and the safety limit [N m]."""
+        return min(self.kt_out * self.values["driver"]["current_limit"], self.values["safety"]["torque_limit"])
+
+    @property
+    def counts_per_rev(self) -> Fraction:
+        return counts_fraction(self.values)
+
+    # --- identity ---------------------------------------------------------------------
+    def canonical_json(self) -> str:
+        return json.dumps(self.values, sort_keys=True, separators=(",", ":"))
+
+    def sha256(self) -> str:
+        """Hash of the resolved values: identical physics and weights give identical hashes."""
+        return hashlib.sha256(self.canonical_json().encode()).hexdigest()
+
+    def with_overrides(self, *overrides: str) -> "Params":
+        raw = json.loads(self.canonical_json())
+        for o in overrides:
+            section, key, value = _parse_override(o)
+            if section not in SCHEMA or key not in SCHEMA[section]:
+                raise ParamError(f"--set {section}.{key}: unknown key")
+            raw[section][key] = value
+        return Params(validate(raw, source=self.source), source=self.source)
+
+    def to_toml(self) -> str:
+        """The resolved values as a complete parameter file, keeping the default file's comments."""
+        out, section = [], None
+        for line in DEFAULT_PARAMS.read_text().splitlines():
+            head = line.split("#", 1)[0].strip()
+            if head.startswith("[") and head.endswith("]"):
+                section = head[1:-1].strip()
+            elif "=" in head and section in SCHEMA:
+                key = head.split("=", 1)[0].strip()
+                if key in SCHEMA[section]:
+                    value = _toml_value(self.values[section][key])
+                    comment = line[line.index("#"):] if "#" in line else ""
+                    line = f"{key} = {value}".ljust(max(28, len(key) + len(value) + 4)) + comment
+            out.append(line)
+        return "\n".join(out) + "\n"
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return json.dumps(v)
+    return repr(v)
