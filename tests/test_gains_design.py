@@ -1,0 +1,253 @@
+"""Sampled-loop design, refusal of unstable designs, the generated header and the `rodctl gains` CLI."""
+
+import json
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from rodctl import paths
+from rodgains import sampled
+from rodgains.design import design
+from rodgains.params import load_params
+
+
+def rodctl(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "rodctl.cli", *args], capture_output=True, text=True, cwd=cwd)
+
+
+def one_line_error(result, code):
+    assert result.returncode == code, result.stderr
+    assert "Traceback" not in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    return result.stderr.strip()
+
+
+# --- design ---------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("edges,rate", [(2, 1000.0), (5, 500.0), (5, 1000.0), (5, 2000.0), (20, 1000.0)])
+def test_sampled_design_stabilizes_the_sampled_loop(edges, rate):
+    d = design(load_params(overrides=[f"rod.edges={edges}", f"loop.rate_hz={rate}"]))
+    rho = sampled.spectral_radius(d.loop())
+    assert rho < 1.0
+    assert d.checks["closed_loop_spectral_radius"] == pytest.approx(rho)
+    # separation: the loop's eigenvalues are the controller's and the current-estimator's
+    ctrl = np.linalg.eigvals(d.Ad - d.Bd @ d.K)
+    obs = np.linalg.eigvals(d.Ad - d.L @ d.C @ d.Ad)
+    assert max(np.abs(ctrl).max(), np.abs(obs).max()) == pytest.approx(rho, rel=1e-6)
+
+
+@pytest.mark.parametrize("rate,radius", [(500, 38), (1000, 20), (2000, 10), (5000, 3.5)])
+def test_paper_continuous_K_is_unstable_when_sampled(rate, radius):
+    """Physics notes: spectral radius of Ad - Bd K for the paper's K on the bare Table I rod."""
+    from rodgains.report import paper_continuous_sampled
+
+    d = design(load_params(overrides=[f"loop.rate_hz={rate}"]))
+    bare = paper_continuous_sampled(d, bare=True)
+    assert bare["fastest_continuous_pole"] == pytest.approx(-2.3e4, rel=0.03)
+    assert bare["state_feedback_radius"] == pytest.approx(radius, rel=0.05)
+
+
+def test_filter_gain_is_the_current_estimate_form():
+    d = design(load_params())
+    Wd = sampled.sampled_process_noise(d.A, np.diag([0.05] * 5 + [0.01] * 5), d.dt)
+    L, P = sampled.kalman_current(d.Ad, d.C, Wd, np.array([[1.0 / d.dt]]))
+    predictor = d.Ad @ L
+    assert np.allclose(d.L, L)
+    assert not np.allclose(d.L, predictor)
+    # P is the prior covariance: L = P C^T / (C P C^T + V)
+    assert np.allclose(L[:, 0], P[:, 0] / (P[0, 0] + 1.0 / d.dt))
+
+
+def test_sampled_cost_matches_brute_force_quadrature():
+    d = design(load_params())
+    Q = np.diag([0.5] * 5 + [0.1] * 5)
+    R = np.array([[1.0]])
+    Qd, Rd, Nd = sampled.sampled_cost(d.A, d.B, Q, R, d.dt)
+    # trapezoid on 20001 points of the ZOH response
+    ts = np.linspace(0, d.dt, 20001)
+    acc = np.zeros((11, 11))
+    prev = None
+    for t in ts:
+        Ad, Bd = sampled.zoh(d.A, d.B, t)
+        G = np.hstack([Ad, Bd])
+        X = G.T @ Q @ G
+        X[10, 10] += R[0, 0]
+        if prev is not None:
+            acc += 0.5 * (X + prev) * (ts[1] - ts[0])
+        prev = X
+    assert np.allclose(Qd, acc[:10, :10], rtol=1e-4, atol=1e-12)
+    assert np.allclose(Nd, acc[:10, 10:], rtol=1e-4, atol=1e-12)
+    assert Rd[0, 0] == pytest.approx(acc[10, 10], rel=1e-6)
+
+
+# --- CLI: gains, refusal, header ----------------------------------------------------------------
+
+def test_unstable_design_is_refused_with_exit_3(tmp_path):
+    r = rodctl("gains", "--set", "design.method=continuous", "--header", str(tmp_path / "h.h"))
+    msg = one_line_error(r, 3)
+    assert "spectral radius" in msg
+    assert not (tmp_path / "h.h").exists()
+
+
+def test_refused_bare_paper_design_reports_radius_20(tmp_path):
+    r = rodctl("gains", "--set", "design.method=continuous", "--set", "motor.design_includes_motor=false",
+               "--header", str(tmp_path / "h.h"))
+    msg = one_line_error(r, 3)
+    radius = float(msg.split("spectral radius ")[1].split()[0])
+    assert radius == pytest.approx(20.1, rel=0.02)
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--set", "rod.length=-0.1"], "rod.length: must be > 0"),
+    (["--set", "rod.edges=1"], "rod.edges: must be between 2"),
+    (["--set", "rod.edges=5.5"], "rod.edges: expected an integer"),
+    (["--set", "rod.length=long"], "rod.length: expected a number"),
+    (["--set", "rod.colour=3"], "rod.colour: unknown key"),
+    (["--set", "rodedges"], "expected section.key=value"),
+    (["--set", "driver.supply_voltage=48"], "driver.supply_voltage: must be between 4.5 and 36"),
+    (["--set", "safety.angle_limit_deg=20"], "safety.angle_limit_deg: must exceed"),
+    (["--params", "/nonexistent.toml"], "cannot read parameter file"),
+])
+def test_bad_parameters_give_one_line_and_exit_2(args, needle, tmp_path):
+    r = rodctl("gains", *args, "--header", str(tmp_path / "h.h"))
+    assert needle in one_line_error(r, 2)
+
+
+def test_missing_and_unknown_keys_in_a_file(tmp_path):
+    text = paths.REPO.joinpath("gains/default.toml").read_text()
+    missing = tmp_path / "missing.toml"
+    missing.write_text(text.replace("gravity = 9.81", ""))
+    assert "rod.gravity: missing key" in one_line_error(rodctl("gains", "--params", str(missing), "--check"), 2)
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace("[lqr]", "[lqr]\nq_tip = 3.0"))
+    assert "lqr.q_tip: unknown key" in one_line_error(rodctl("gains", "--params", str(bad), "--check"), 2)
+    broken = tmp_path / "broken.toml"
+    broken.write_text("[rod\n")
+    assert "not valid TOML" in one_line_error(rodctl("gains", "--params", str(broken), "--check"), 2)
+
+
+def test_params_command_round_trips_a_complete_file(tmp_path):
+    out = tmp_path / "mine.toml"
+    r = rodctl("params", "--set", "rod.edges=7", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    p = load_params(out)
+    assert p.N == 7 and p["rod"]["length"] == 0.155
+    assert "[T1]" in out.read_text()  # the default file's source comments survive
+
+
+def test_committed_header_is_current():
+    r = rodctl("gains", "--check")
+    assert r.returncode == 0, r.stderr
+
+
+def test_check_fails_on_a_stale_header(tmp_path):
+    h = tmp_path / "rod_gains.h"
+    assert rodctl("gains", "--header", str(h)).returncode == 0
+    assert rodctl("gains", "--header", str(h), "--check").returncode == 0
+    h.write_text(h.read_text().replace("#define ROD_N ", "#define ROD_N 6 //"))
+    r = rodctl("gains", "--header", str(h), "--check")
+    assert r.returncode == 1
+    assert "regenerate with: rodctl gains --header" in r.stderr
+
+
+def test_header_is_byte_identical_across_runs_and_has_no_timestamp(tmp_path):
+    a, b = tmp_path / "a" / "rod_gains.h", tmp_path / "b" / "rod_gains.h"
+    for h in (a, b):
+        h.parent.mkdir()
+        assert rodctl("gains", "--set", "rod.edges=8", "--header", str(h)).returncode == 0
+    ta, tb = a.read_text(), b.read_text()
+    assert ta.replace(str(a), "") == tb.replace(str(b), "")  # only the path in the regenerate line may differ
+    assert "DO NOT EDIT" in ta and "Regenerate: rodctl gains --set rod.edges=8" in ta
+    p = load_params(overrides=["rod.edges=8"])
+    assert f"Inputs SHA-256: {p.sha256()}" in ta
+    import re
+
+    assert not re.search(r"\d{4}-\d{2}-\d{2}|\d{1,2}:\d{2}(:\d{2})?", ta)  # no date or clock time anywhere
+
+
+def test_header_literals_are_all_float():
+    text = paths.COMMITTED_HEADER.read_text()
+    import re
+
+    body = text.split("#define ROD_GAINS_H", 1)[1]
+    body = re.sub(r"/\*.*?\*/", "", body, flags=re.S)
+    body = re.sub(r'"[^"]*"', "", body)
+    decimals = re.findall(r"[-+]?\d+\.\d*(?:e[-+]?\d+)?f?|\d+e[-+]?\d+f?", body)
+    assert decimals, "no floating literals found"
+    assert all(x.endswith("f") for x in decimals), [x for x in decimals if not x.endswith("f")][:5]
+
+
+SMOKE_C = r"""
+#include "rod_gains.h"
+#if ROD_GAINS_SCHEMA_VERSION != 1
+#error "schema"
+#endif
+const float Ad[ROD_NX][ROD_NX] = ROD_AD_INIT;
+const float Bd[ROD_NX] = ROD_BD_INIT;
+const float K[ROD_NX] = ROD_K_INIT;
+const float L[ROD_NX] = ROD_L_INIT;
+const unsigned char sha[32] = ROD_GAINS_SHA256_BYTES_INIT;
+float step(const float *z, float u) {
+    float acc = 0.0f;
+    for (int i = 0; i < ROD_NX; i++) {
+        float zi = Bd[i] * u + L[i] * ROD_RAD_PER_COUNT;
+        for (int j = 0; j < ROD_NX; j++) zi += Ad[i][j] * z[j];
+        acc -= K[i] * zi;
+    }
+    acc *= ROD_DT_S * ROD_LOOP_RATE_HZ * ROD_TORQUE_MAX_NM * ROD_SWING_ANGLE_RAD * ROD_MOTOR_KT_NM_PER_A;
+    return acc + (float)(ROD_COUNTS_PER_REV_NUM / ROD_COUNTS_PER_REV_DEN) + (float)sha[0];
+}
+"""
+
+WARN = ["-std=c11", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror", "-c"]
+
+
+@pytest.mark.parametrize("edges", [5, 20])
+@pytest.mark.parametrize("cc,target", [
+    ("gcc", []),
+    ("arm-none-eabi-gcc", ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-O2"]),
+])
+def test_header_compiles_warning_free_for_host_and_cortex_m4f(cc, target, edges, tmp_path):
+    if shutil.which(cc) is None:
+        pytest.fail(f"{cc} not installed (.ci/run installs it)")
+    h = tmp_path / "rod_gains.h"
+    assert rodctl("gains", "--set", f"rod.edges={edges}", "--header", str(h)).returncode == 0
+    src = tmp_path / "smoke.c"
+    src.write_text(SMOKE_C)
+    r = subprocess.run([cc, *WARN, *target, f"-I{tmp_path}", str(src), "-o", str(tmp_path / "smoke.o")],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    if cc.startswith("arm"):
+        nm = subprocess.run(["arm-none-eabi-nm", str(tmp_path / "smoke.o")], capture_output=True, text=True)
+        assert "__aeabi_d" not in nm.stdout
+
+
+def test_json_has_the_design_with_documented_shapes(tmp_path):
+    out = tmp_path / "design.json"
+    r = rodctl("gains", "--json", str(out))
+    assert r.returncode == 0, r.stderr
+    j = json.loads(out.read_text())
+    N = j["N"]
+    assert N == 5 and j["dt"] == pytest.approx(1e-3)
+    for key, shape in {"A": (10, 10), "B": (10, 1), "Ad": (10, 10), "Bd": (10, 1), "C": (1, 10),
+                       "K": (1, 10), "L": (10, 1)}.items():
+        assert np.array(j[key]).shape == shape, key
+    assert j["observer_form"] == "current"
+    Ad, Bd, K = np.array(j["Ad"]), np.array(j["Bd"]), np.array(j["K"])
+    assert np.abs(np.linalg.eigvals(Ad - Bd @ K)).max() < 1  # u = -K (x - x_upright)
+    A, B = np.array(j["A"]), np.array(j["B"])
+    assert B[N, 0] > 0  # positive torque accelerates theta_1
+
+
+def test_report_lists_critical_lengths_margins_and_the_sampled_paper_gain():
+    r = rodctl("gains", "--report")
+    assert r.returncode == 0, r.stderr
+    out = r.stdout
+    assert "continuum (Greenhill, corrected eq. 23): 15.40 cm" in out
+    assert "N = 5 link model:" in out and "16.97 cm" in out
+    assert "phase margin" in out and "stable for actuator gain in" in out
+    line = [x for x in out.splitlines() if "bare rod of Table I" in x][0]
+    assert "UNSTABLE" in line and "sampled spectral radius 20.1" in line
