@@ -1,0 +1,41 @@
+// board_pins.h -- every pin and board constant of the Teensy 3.5 rod testbed, in one place.
+//
+// Checked against PaulStoffregen/cores teensy3/core_pins.h (MK64FX512 section: CORE_PINn_CONFIG)
+// and the K64 signal multiplexing (PTA12/PTA13 ALT7 = FTM1_QD_PHA/PHB).
+#ifndef BOARD_PINS_H
+#define BOARD_PINS_H
+
+// Encoder, hardware quadrature on FTM1 (pin mux ALT7).
+#define BOARD_PIN_ENC_A 3   // PTA12 = FTM1_QD_PHA (CORE_PIN3_CONFIG = PORTA_PCR12)
+#define BOARD_PIN_ENC_B 4   // PTA13 = FTM1_QD_PHB (CORE_PIN4_CONFIG = PORTA_PCR13)
+
+// MAX14870 driver.
+#define BOARD_PIN_PWM 5     // PTD7 = FTM0_CH7, analogWrite
+#define BOARD_PIN_DIR 6     // PTD4, GPIO
+#define BOARD_PIN_NEN 7     // PTD2, GPIO, low = driver enabled
+#define BOARD_PIN_NFAULT 8  // PTD3, open drain from the driver: INPUT_PULLUP, low = fault
+#define BOARD_PIN_LED 13    // PTC5, on-board LED
+
+// Sign conventions of the wiring (commissioning: theta_1 and the count must rise together, and
+// a positive duty must accelerate theta_1 positively). Flip one of these rather than rewiring.
+#define BOARD_ENCODER_SIGN 1
+#define BOARD_MOTOR_DIR_SIGN 1
+
+// analogWrite resolution for the PWM pin; at 20 kHz FTM0 counts to 3000 (60 MHz bus), so 12
+// bits is finer than the hardware and loses nothing.
+#define BOARD_PWM_RESOLUTION_BITS 12
+
+// Encoder input filters: a phase edge must be stable 4 x FVAL bus clocks (K64 RM, FTMx_FILTER):
+// 8 -> 32 clocks = 0.53 us at 60 MHz, far below the 120 us between counts at no-load speed.
+#define BOARD_ENCODER_FILTER 8
+
+// NVIC priorities (lower = more urgent; the K64 implements the top 4 bits). USB runs at 112
+// (usb_dev.c usb_init), IntervalTimer defaults to 128, SysTick at 32 (mk20dx128.c).
+#define BOARD_CONTROL_IRQ_PRIORITY 64  // the control step preempts USB
+#define BOARD_NFAULT_IRQ_PRIORITY 32   // a driver fault preempts the control step
+
+// Kinetis watchdog: reset when the main loop stops, or the control interrupt stops running.
+#define BOARD_WATCHDOG_ENABLED 1
+#define BOARD_WATCHDOG_TIMEOUT_MS 100
+
+#endif  // BOARD_PINS_H

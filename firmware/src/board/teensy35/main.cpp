@@ -1,0 +1,218 @@
+// main.cpp -- the Teensy 3.5 board: pins, timer, USB. The firmware itself is rod_device (core).
+//
+// Control step: IntervalTimer interrupt every ROD_LOOP_PERIOD_US at a priority above USB; it
+// reads the encoder and nFAULT, runs rod_device_step, and drives DIR / PWM / nEN. USB: only in
+// loop(), never blocking: host bytes go to rod_device_rx (leftovers kept while the core's
+// command ring is full); frames from rod_device_tx are written only as far as the current USB
+// packet has room (usb_serial_write_buffer_free() is the room in one 64-byte packet, not the
+// whole queue), and a frame that finds no room at all is dropped and counted.
+//
+// Teensyduino API checked in PaulStoffregen/cores teensy3/: IntervalTimer.h (priority(),
+// begin(f, unsigned us)), usb_serial.h (available, readBytes, availableForWrite, write),
+// usb_serial.c (write_buffer_free semantics), pins_teensy.c (analogWrite*, micros is ISR-safe),
+// core_pins.h (digitalWriteFast, CORE_PINn_*), kinetis.h (NVIC_SET_PRIORITY, IRQ_PORTD).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wdouble-promotion"  // framework headers, not ours
+#include <Arduino.h>
+#include <IntervalTimer.h>
+#pragma GCC diagnostic pop
+
+#include <math.h>
+
+#include "board_pins.h"
+#include "board_quadrature.h"
+#include "board_watchdog.h"
+#include "rod_device.h"
+
+// ARMv7-M debug registers (architecture addresses), in case this kinetis.h lacks the names.
+#ifndef ARM_DWT_CYCCNT
+#define ARM_DEMCR (*(volatile uint32_t *)0xE000EDFC)
+#define ARM_DEMCR_TRCENA (1u << 24)
+#define ARM_DWT_CTRL (*(volatile uint32_t *)0xE0001000)
+#define ARM_DWT_CTRL_CYCCNTENA (1u << 0)
+#define ARM_DWT_CYCCNT (*(volatile uint32_t *)0xE0001004)
+#endif
+
+static rod_device_t device;
+static IntervalTimer control_timer;
+
+static volatile bool nfault_seen;    // set by the nFAULT edge, consumed by the next step
+static volatile uint32_t steps_run;  // advances every step: the watchdog's proof of life
+static uint32_t last_step_us;        // CPU time of the previous step (control ISR only)
+static uint32_t pwm_level = 0;       // last analogWrite value (control ISR only)
+
+static const uint32_t PWM_FULL = 1u << BOARD_PWM_RESOLUTION_BITS;
+
+// Falling nFAULT: the driver reports a fault. Off at once, before the next control step sees it.
+static void nfault_falling()
+{
+    digitalWriteFast(BOARD_PIN_NEN, HIGH);
+    nfault_seen = true;
+}
+
+static void apply(const rod_outputs_t &out)
+{
+    if (!out.enable) {
+        digitalWriteFast(BOARD_PIN_NEN, HIGH);  // off first, then the PWM
+    }
+    float duty = (float)BOARD_MOTOR_DIR_SIGN * (out.enable ? out.duty : 0.0f);
+    uint32_t level = (uint32_t)(fabsf(duty) * (float)PWM_FULL + 0.5f);
+    if (level > PWM_FULL) {
+        level = PWM_FULL;
+    }
+    digitalWriteFast(BOARD_PIN_DIR, duty < 0.0f ? HIGH : LOW);
+    if (level != pwm_level) {
+        analogWrite(BOARD_PIN_PWM, (int)level);  // 0 and PWM_FULL become a steady low / high
+        pwm_level = level;
+    }
+    if (out.enable) {
+        // A fault edge arriving after this step read nFAULT must still win: check and enable
+        // without being interrupted in between.
+        __disable_irq();
+        if (!nfault_seen) {
+            digitalWriteFast(BOARD_PIN_NEN, LOW);
+        }
+        __enable_irq();
+    }
+}
+
+static void control_step()
+{
+    uint32_t start = ARM_DWT_CYCCNT;
+    rod_inputs_t in;
+    in.now_us = micros();
+    in.encoder_count = board_quadrature_count();
+    in.last_step_us = last_step_us;
+    bool edge = nfault_seen;
+    in.driver_fault = edge || digitalReadFast(BOARD_PIN_NFAULT) == LOW;
+
+    rod_outputs_t out;
+    rod_device_step(&device, &in, &out);
+    if (edge) {
+        nfault_seen = false;  // reported: the core has latched FAULT and disabled the outputs
+    }
+    apply(out);
+
+    steps_run = steps_run + 1;
+    last_step_us = (ARM_DWT_CYCCNT - start) / (F_CPU / 1000000u);
+}
+
+// ---- main loop: USB both ways, never blocking --------------------------------------------------
+
+static uint8_t rx_buf[64];
+static size_t rx_len, rx_used;
+
+static void service_rx()
+{
+    if (rx_used == rx_len) {
+        int avail = Serial.available();
+        if (avail <= 0) {
+            return;
+        }
+        size_t want = (size_t)avail < sizeof rx_buf ? (size_t)avail : sizeof rx_buf;
+        rx_len = Serial.readBytes((char *)rx_buf, want);  // want <= available: returns at once
+        rx_used = 0;
+    }
+    rx_used += rod_device_rx(&device, rx_buf + rx_used, rx_len - rx_used);
+}
+
+static uint8_t tx_buf[ROD_DEVICE_FRAME_MAX];
+static size_t tx_len, tx_sent;
+
+static void service_tx()
+{
+    for (;;) {
+        if (tx_sent == tx_len) {
+            tx_len = rod_device_tx(&device, tx_buf, sizeof tx_buf);
+            tx_sent = 0;
+            if (tx_len == 0) {
+                return;
+            }
+            if (Serial.availableForWrite() <= 0) {
+                // Host not reading (or not connected): drop this frame, keep the queue fresh.
+                rod_device_count_tx_drop(&device);
+                tx_len = 0;
+                continue;
+            }
+        }
+        int room = Serial.availableForWrite();
+        if (room <= 0) {
+            return;  // finish this frame once USB has taken the previous packets
+        }
+        size_t n = tx_len - tx_sent;
+        if (n > (size_t)room) {
+            n = (size_t)room;
+        }
+        Serial.write(tx_buf + tx_sent, n);
+        tx_sent += n;
+    }
+}
+
+static void service_watchdog()
+{
+#if BOARD_WATCHDOG_ENABLED
+    // Refresh only while the control interrupt is alive too: a stopped timer also resets.
+    static uint32_t steps_at_refresh;
+    uint32_t steps = steps_run;
+    if (steps != steps_at_refresh) {
+        steps_at_refresh = steps;
+        board_watchdog_refresh();
+    }
+#endif
+}
+
+static void service_led()
+{
+    uint8_t mode = device.control.mode;  // one byte, written by the step: a stale read is harmless
+    uint32_t ms = millis();
+    bool on;
+    if (mode == ROD_MODE_BALANCE) {
+        on = true;
+    } else if (mode == ROD_MODE_SWING_UP || mode == ROD_MODE_CATCH) {
+        on = (ms / 250u) % 2u == 0u;
+    } else if (mode == ROD_MODE_FAULT) {
+        on = (ms / 60u) % 2u == 0u;
+    } else {
+        on = (ms / 1000u) % 10u == 0u;  // disarmed: a short blink every 10 s
+    }
+    digitalWriteFast(BOARD_PIN_LED, on ? HIGH : LOW);
+}
+
+void setup()
+{
+    // Driver disabled before anything else: latch high, then make it an output (no low glitch).
+    digitalWriteFast(BOARD_PIN_NEN, HIGH);
+    pinMode(BOARD_PIN_NEN, OUTPUT);
+    digitalWriteFast(BOARD_PIN_DIR, LOW);
+    pinMode(BOARD_PIN_DIR, OUTPUT);
+    analogWriteResolution(BOARD_PWM_RESOLUTION_BITS);
+    analogWriteFrequency(BOARD_PIN_PWM, (float)ROD_PWM_FREQUENCY_HZ);
+    analogWrite(BOARD_PIN_PWM, 0);
+    pinMode(BOARD_PIN_LED, OUTPUT);
+
+    pinMode(BOARD_PIN_NFAULT, INPUT_PULLUP);
+    attachInterrupt(BOARD_PIN_NFAULT, nfault_falling, FALLING);
+    NVIC_SET_PRIORITY(IRQ_PORTD, BOARD_NFAULT_IRQ_PRIORITY);
+
+    // The startup code leaves the cycle counter off; the step times itself with it.
+    ARM_DEMCR |= ARM_DEMCR_TRCENA;
+    ARM_DWT_CTRL |= ARM_DWT_CTRL_CYCCNTENA;
+
+    board_quadrature_begin();
+    Serial.begin(115200);  // USB: the baud rate is ignored
+    rod_device_init(&device);
+
+    control_timer.priority(BOARD_CONTROL_IRQ_PRIORITY);  // before begin(): begin applies it
+    control_timer.begin(control_step, ROD_LOOP_PERIOD_US);
+#if BOARD_WATCHDOG_ENABLED
+    board_watchdog_begin(BOARD_WATCHDOG_TIMEOUT_MS);
+#endif
+}
+
+void loop()
+{
+    service_rx();
+    service_tx();
+    service_watchdog();
+    service_led();
+}

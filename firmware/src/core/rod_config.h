@@ -1,0 +1,117 @@
+/* rod_config.h -- the generated gains plus the firmware's own constants, checked at compile time.
+ *
+ * Every core file includes this instead of rod_gains.h, so a header from another generator
+ * version, or parameters the firmware cannot run, stop the build here with a message instead
+ * of misbehaving on the rig.
+ */
+#ifndef ROD_CONFIG_H
+#define ROD_CONFIG_H
+
+#include "rod_gains.h"
+
+/* ---- the header's layout ---------------------------------------------------------------- */
+
+/* The macro set this firmware was written against (gains/codegen.py HEADER_SCHEMA_VERSION). */
+#define ROD_GAINS_SCHEMA_EXPECTED 1
+
+#ifndef ROD_GAINS_SCHEMA_VERSION
+#error "rod_gains.h has no ROD_GAINS_SCHEMA_VERSION: regenerate it with `rodctl gains`"
+#elif ROD_GAINS_SCHEMA_VERSION != ROD_GAINS_SCHEMA_EXPECTED
+#error "rod_gains.h has a different ROD_GAINS_SCHEMA_VERSION than this firmware expects (1): regenerate it with the rodctl of this checkout (`rodctl gains`)"
+#endif
+
+#if !defined(ROD_N) || !defined(ROD_NX) || !defined(ROD_LOOP_PERIOD_US) || !defined(ROD_DT_S) \
+    || !defined(ROD_COUNTS_PER_REV_NUM) || !defined(ROD_COUNTS_PER_REV_DEN) \
+    || !defined(ROD_RATE_FILTER_K1) || !defined(ROD_RATE_FILTER_K2) \
+    || !defined(ROD_MOTOR_KT_NM_PER_A) || !defined(ROD_MOTOR_KE_V_S_PER_RAD) || !defined(ROD_MOTOR_R_OHM) \
+    || !defined(ROD_SUPPLY_V) || !defined(ROD_TORQUE_MAX_NM) || !defined(ROD_DUTY_MAX) \
+    || !defined(ROD_PWM_FREQUENCY_HZ) || !defined(ROD_SWING_AMPLITUDE_NM) || !defined(ROD_SWING_ANGLE_RAD) \
+    || !defined(ROD_CATCH_ANGLE_RAD) || !defined(ROD_ANGLE_LIMIT_RAD) || !defined(ROD_SPEED_LIMIT_RAD_S) \
+    || !defined(ROD_HEARTBEAT_TIMEOUT_S) || !defined(ROD_GAINS_SHA256_BYTES_INIT) \
+    || !defined(ROD_AD_INIT) || !defined(ROD_BD_INIT) || !defined(ROD_K_INIT) || !defined(ROD_L_INIT)
+#error "rod_gains.h lacks a macro the firmware needs: regenerate it with `rodctl gains`"
+#endif
+
+/* ---- integer assumptions (preprocessor) ------------------------------------------------- */
+
+#if ROD_NX != 2 * ROD_N
+#error "ROD_NX must be 2 * ROD_N (angles then rates)"
+#endif
+#if ROD_N < 1 || ROD_N > 64
+#error "ROD_N must be 1..64 (telemetry carries at most 64 edges)"
+#endif
+#if ROD_COUNTS_PER_REV_NUM < 2 || ROD_COUNTS_PER_REV_DEN < 1
+#error "counts per revolution must be a positive fraction NUM / DEN"
+#endif
+/* rod_angle works in ticks of 1/(2 DEN) count; one turn is 2 NUM ticks, and NUM * DEN products
+ * must stay far inside int32 (with room for a few turns of difference). */
+#if ROD_COUNTS_PER_REV_NUM > 1000000 || ROD_COUNTS_PER_REV_DEN > 1000 \
+    || ROD_COUNTS_PER_REV_NUM * ROD_COUNTS_PER_REV_DEN > 10000000
+#error "counts per revolution fraction too large for rod_angle's int32 tick arithmetic"
+#endif
+#if ROD_LOOP_PERIOD_US < 50 || ROD_LOOP_PERIOD_US > 100000
+#error "ROD_LOOP_PERIOD_US outside 50 us .. 100 ms"
+#endif
+#if ROD_PWM_FREQUENCY_HZ < 1000 || ROD_PWM_FREQUENCY_HZ > 100000
+#error "ROD_PWM_FREQUENCY_HZ outside 1 kHz .. 100 kHz"
+#endif
+
+/* ---- firmware constants ----------------------------------------------------------------- */
+
+#define ROD_PI_F 3.14159265f
+#define ROD_TWO_PI_F 6.28318531f
+#define ROD_HALF_PI_F 1.57079633f
+
+/* Swing-up starts from rest, where sign(rate) of eq. (22) is 0: below this base speed and
+ * within this angle of hanging the pump pushes in the + direction instead. The rate filter
+ * reads 0 at rest, and a single count of motion already reads about 0.6 rad/s, so a small
+ * threshold separates "at rest" from "moving" (it also acts briefly at the turning points of
+ * a small swing, which only adds a millisecond of + torque there). */
+#define ROD_SWING_REST_RATE_RAD_S 0.05f
+#define ROD_SWING_REST_ANGLE_RAD 0.1f
+
+/* Runtime-setting bounds (SET): out of bounds -> BAD_VALUE, state unchanged. */
+#define ROD_DECIMATION_MIN 1
+#define ROD_DECIMATION_MAX 1000
+#define ROD_HEARTBEAT_TIMEOUT_MIN_S 0.05f
+#define ROD_HEARTBEAT_TIMEOUT_MAX_S 10.0f
+/* Catch angle must stay below both the balance angle limit (or balance would trip on entry)
+ * and a quarter turn (beyond it the linear model is meaningless). */
+#define ROD_CATCH_ANGLE_MAX_RAD (ROD_ANGLE_LIMIT_RAD < ROD_HALF_PI_F ? ROD_ANGLE_LIMIT_RAD : ROD_HALF_PI_F)
+
+/* Unprompted HELLO interval, in control steps (about once per second). */
+#define ROD_HELLO_INTERVAL_STEPS ((1000000u + ROD_LOOP_PERIOD_US / 2u) / ROD_LOOP_PERIOD_US)
+
+/* Ring capacities (powers of two). Commands are drained every step, so a few suffice; events
+ * cover USB stalls of ~30 steps at decimation 1 before frames are dropped (and counted). */
+#define ROD_COMMAND_RING_SIZE 16u
+#define ROD_EVENT_RING_SIZE 32u
+
+/* ---- float assumptions (constant expressions; C11 and C++ alike) ------------------------ */
+
+#ifdef __cplusplus
+#define ROD_STATIC_ASSERT(cond, msg) static_assert(cond, msg)
+#else
+#define ROD_STATIC_ASSERT(cond, msg) _Static_assert(cond, msg)
+#endif
+
+ROD_STATIC_ASSERT(ROD_TORQUE_MAX_NM > 0.0f, "torque ceiling must be positive");
+ROD_STATIC_ASSERT(ROD_DUTY_MAX > 0.0f && ROD_DUTY_MAX <= 1.0f, "duty ceiling must be in (0, 1]");
+ROD_STATIC_ASSERT(ROD_MOTOR_KT_NM_PER_A > 0.0f && ROD_MOTOR_R_OHM > 0.0f && ROD_SUPPLY_V > 0.0f,
+                  "motor model needs positive kt, R and supply voltage");
+ROD_STATIC_ASSERT(ROD_MOTOR_KE_V_S_PER_RAD >= 0.0f, "back-EMF constant must not be negative");
+ROD_STATIC_ASSERT(ROD_ANGLE_LIMIT_RAD > 0.0f && ROD_ANGLE_LIMIT_RAD <= ROD_PI_F, "angle limit must be in (0, pi]");
+ROD_STATIC_ASSERT(ROD_SPEED_LIMIT_RAD_S > 0.0f, "speed limit must be positive");
+/* The defaults must pass the same bounds a SET would. */
+ROD_STATIC_ASSERT(ROD_SWING_AMPLITUDE_NM >= 0.0f && ROD_SWING_AMPLITUDE_NM <= ROD_TORQUE_MAX_NM,
+                  "default swing amplitude outside [0, torque max]");
+ROD_STATIC_ASSERT(ROD_SWING_ANGLE_RAD > 0.0f && ROD_SWING_ANGLE_RAD <= ROD_PI_F, "default swing angle outside (0, pi]");
+ROD_STATIC_ASSERT(ROD_CATCH_ANGLE_RAD > 0.0f && ROD_CATCH_ANGLE_RAD < ROD_CATCH_ANGLE_MAX_RAD,
+                  "default catch angle must be inside (0, min(angle limit, pi/2))");
+ROD_STATIC_ASSERT(ROD_HEARTBEAT_TIMEOUT_S >= ROD_HEARTBEAT_TIMEOUT_MIN_S && ROD_HEARTBEAT_TIMEOUT_S <= ROD_HEARTBEAT_TIMEOUT_MAX_S,
+                  "default heartbeat timeout outside [0.05, 10] s");
+ROD_STATIC_ASSERT(ROD_DT_S > 0.0f, "control period must be positive");
+ROD_STATIC_ASSERT((ROD_COMMAND_RING_SIZE & (ROD_COMMAND_RING_SIZE - 1u)) == 0u, "ring sizes are powers of two");
+ROD_STATIC_ASSERT((ROD_EVENT_RING_SIZE & (ROD_EVENT_RING_SIZE - 1u)) == 0u, "ring sizes are powers of two");
+
+#endif /* ROD_CONFIG_H */

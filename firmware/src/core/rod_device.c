@@ -1,0 +1,175 @@
+/* rod_device.c -- one step: apply commands, run the control, queue numbered frames. */
+#include "rod_device.h"
+
+#include "rod_version.h"
+
+static const uint8_t gains_sha256[32] = ROD_GAINS_SHA256_BYTES_INIT;
+
+void rod_device_init(rod_device_t *dev)
+{
+    rod_control_init(&dev->control);
+    rod_link_init(&dev->link);
+    dev->seq = 0;
+    dev->ring_drops = 0;
+    dev->steps_since_telemetry = 0;
+    dev->steps_since_hello = 0;
+    dev->hello_wanted = true; /* announce ourselves on the first step */
+}
+
+/* A numbered slot for the next frame; NULL (and one drop, one number used) when the ring is
+ * full, so the host sees the loss as a sequence gap. */
+static rod_event_t *new_event(rod_device_t *dev, uint8_t type, uint32_t time_us)
+{
+    uint32_t seq = dev->seq++;
+    rod_event_t *ev = rod_link_claim_event(&dev->link);
+    if (ev == NULL) {
+        dev->ring_drops++;
+        return NULL;
+    }
+    ev->type = type;
+    ev->seq = seq;
+    ev->time_us = time_us;
+    return ev;
+}
+
+static uint8_t apply_command(rod_device_t *dev, const rod_msg_command_t *cmd)
+{
+    rod_control_t *c = &dev->control;
+    if (cmd->status != ROD_ACK_OK) {
+        return cmd->status; /* unknown type or bad length: refused, nothing changes */
+    }
+    switch (cmd->type) {
+    case ROD_MSG_HEARTBEAT:
+        return ROD_ACK_OK;
+    case ROD_MSG_ARM:
+        return rod_control_arm(c, cmd->arm_mode);
+    case ROD_MSG_DISARM:
+        return rod_control_disarm(c);
+    case ROD_MSG_CLEAR_FAULT:
+        return rod_control_clear_fault(c);
+    case ROD_MSG_SET:
+        return rod_control_set(c, cmd->param, cmd->value);
+    case ROD_MSG_HELLO_REQUEST:
+        dev->hello_wanted = true;
+        return ROD_ACK_OK;
+    default:
+        return ROD_ACK_UNKNOWN_COMMAND;
+    }
+}
+
+static void handle_commands(rod_device_t *dev, uint32_t now_us)
+{
+    rod_msg_command_t cmd;
+    while (rod_link_take_command(&dev->link, &cmd)) {
+        uint8_t result = apply_command(dev, &cmd);
+        rod_event_t *ev = new_event(dev, ROD_MSG_ACK, now_us);
+        if (ev != NULL) {
+            ev->u.ack.command = cmd.type;
+            ev->u.ack.result = result;
+            ev->u.ack.command_seq = cmd.seq;
+            ev->u.ack.mode = dev->control.mode;
+            rod_link_publish_event(&dev->link);
+        }
+    }
+}
+
+static void queue_telemetry(rod_device_t *dev, uint32_t now_us)
+{
+    const rod_control_t *c = &dev->control;
+    rod_event_t *ev = new_event(dev, ROD_MSG_TELEMETRY, now_us);
+    if (ev == NULL) {
+        return;
+    }
+    rod_msg_telemetry_t *m = &ev->u.telemetry.msg;
+    m->mode = c->mode;
+    m->reason = c->reason;
+    m->flags = rod_control_flags(c);
+    m->n = ROD_N;
+    m->encoder_count = c->count;
+    m->base_rate = c->rate;
+    m->torque = c->torque;
+    m->duty = c->duty;
+    m->step_us = (uint16_t)(c->last_step_us > 0xFFFFu ? 0xFFFFu : c->last_step_us);
+    m->overruns = c->overruns;
+    m->frames_dropped = dev->ring_drops + dev->link.tx_drops;
+    m->rx_errors = dev->link.rx_errors;
+    rod_control_estimate(c, ev->u.telemetry.theta_hat, ev->u.telemetry.rate_hat);
+    m->theta_hat = ev->u.telemetry.theta_hat;
+    m->rate_hat = ev->u.telemetry.rate_hat;
+    rod_link_publish_event(&dev->link);
+}
+
+static void queue_hello(rod_device_t *dev, uint32_t now_us)
+{
+    const rod_control_t *c = &dev->control;
+    rod_event_t *ev = new_event(dev, ROD_MSG_HELLO, now_us);
+    if (ev == NULL) {
+        return;
+    }
+    rod_msg_hello_t *h = &ev->u.hello;
+    h->fw_major = ROD_FW_VERSION_MAJOR;
+    h->fw_minor = ROD_FW_VERSION_MINOR;
+    h->fw_patch = ROD_FW_VERSION_PATCH;
+    h->gains_schema = ROD_GAINS_SCHEMA_VERSION;
+    h->n = ROD_N;
+    h->mode = c->mode;
+    h->reason = c->reason;
+    h->period_us = ROD_LOOP_PERIOD_US;
+    h->decimation = c->settings.decimation;
+    h->swing_amplitude = c->settings.swing_amplitude;
+    h->swing_angle = c->settings.swing_angle;
+    h->catch_angle = c->settings.catch_angle;
+    h->heartbeat_timeout = c->settings.heartbeat_timeout;
+    h->torque_max = ROD_TORQUE_MAX_NM;
+    for (int i = 0; i < 32; i++) {
+        h->header_sha256[i] = gains_sha256[i];
+    }
+    rod_link_publish_event(&dev->link);
+}
+
+void rod_device_step(rod_device_t *dev, const rod_inputs_t *in, rod_outputs_t *out)
+{
+    /* Read the heartbeat count before the commands: the main loop counts a frame before it
+     * queues it, so every command seen here has its heartbeat counted too. */
+    uint32_t heartbeats = dev->link.heartbeats;
+    handle_commands(dev, in->now_us);
+    rod_control_step(&dev->control, in, heartbeats, out);
+
+    if (++dev->steps_since_telemetry >= dev->control.settings.decimation) {
+        dev->steps_since_telemetry = 0;
+        queue_telemetry(dev, in->now_us);
+    }
+    if (++dev->steps_since_hello >= ROD_HELLO_INTERVAL_STEPS) {
+        dev->hello_wanted = true;
+    }
+    if (dev->hello_wanted) {
+        dev->hello_wanted = false;
+        dev->steps_since_hello = 0;
+        queue_hello(dev, in->now_us);
+    }
+}
+
+size_t rod_device_rx(rod_device_t *dev, const uint8_t *data, size_t n)
+{
+    return rod_link_rx(&dev->link, data, n);
+}
+
+size_t rod_device_tx(rod_device_t *dev, uint8_t *out, size_t cap)
+{
+    return rod_link_tx(&dev->link, out, cap);
+}
+
+void rod_device_count_tx_drop(rod_device_t *dev)
+{
+    rod_link_count_tx_drop(&dev->link);
+}
+
+bool rod_device_post_command(rod_device_t *dev, const rod_msg_command_t *cmd)
+{
+    return rod_link_post_command(&dev->link, cmd);
+}
+
+void rod_device_heartbeat(rod_device_t *dev)
+{
+    rod_link_heartbeat(&dev->link);
+}

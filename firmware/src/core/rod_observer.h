@@ -1,0 +1,44 @@
+/* rod_observer.h -- the balance estimator and LQR feedback (current-estimate form).
+ *
+ * Deviation coordinates z = x - x_upright, x = [theta_1..N, rates], measurement
+ * y = theta_1 - upright. Each period:
+ *     z_pred = Ad z + Bd u_prev;   z = z_pred + L (y - z_pred[0]);   u = -K z
+ * with the tables of rod_gains.h (designed for exactly this form and ZOH at the loop rate).
+ */
+#ifndef ROD_OBSERVER_H
+#define ROD_OBSERVER_H
+
+#include <stdbool.h>
+
+#include "rod_config.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct {
+    float z[ROD_NX]; /* estimate z[k|k]: angles then rates, relative to upright */
+    float u_prev;    /* torque held over the last period [N m] */
+    bool finite;     /* false once any estimate entry is NaN or inf */
+} rod_observer_t;
+
+/* Estimator initialization at the catch (paper Sec. III-C): every angle deviation = y, every
+ * rate = the measured base rate, u_prev = 0. */
+void rod_observer_init(rod_observer_t *o, float y, float rate);
+
+/* One period: predict with u_prev, correct with y; returns u = -K z of the new estimate
+ * (before any torque limit). Also refreshes o->finite. */
+float rod_observer_step(rod_observer_t *o, float y);
+
+/* u = -K z of the current estimate, without advancing it (used on the catch step). */
+float rod_observer_feedback(const rod_observer_t *o);
+
+/* Record the torque actually applied for the coming period (after limits): the next
+ * prediction must use what the rod felt, not what the LQR asked for. */
+void rod_observer_hold(rod_observer_t *o, float u_applied);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* ROD_OBSERVER_H */

@@ -1,0 +1,21 @@
+"""The control step fits the Teensy's budget: instruction counts on a Cortex-M4F (QEMU)."""
+
+import shutil
+
+import pytest
+
+from rodctl import bench_m4
+
+pytestmark = pytest.mark.skipif(
+    not bench_m4.ICOUNT.is_file() or shutil.which("qemu-system-arm") is None
+    or shutil.which("arm-none-eabi-gcc") is None,
+    reason="needs m4-icount.sh, qemu-system-arm and arm-none-eabi-gcc",
+)
+
+
+def test_step_plus_telemetry_encode_meets_the_instruction_goals():
+    result = bench_m4.measure()
+    for key, goal in bench_m4.GOALS.items():
+        assert 0 < result[key] <= goal, (key, result[key])
+    assert result["m4_step_instructions_n20"] > result["m4_step_instructions_n5"]
+    assert result["m4_core_flash_bytes"] > 0 and result["m4_core_ram_bytes"] > 0

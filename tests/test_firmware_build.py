@@ -1,0 +1,129 @@
+"""The core builds clean for the host and the Cortex-M4F, float only, and refuses a stale header."""
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from firmware_sil import header_path
+from rodctl import paths, target_build
+from rodgains.errors import UserError
+
+WARN = ["-std=c11", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror"]
+ARM = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-O2", "-fsingle-precision-constant"]
+SIL = paths.FIRMWARE / "sil"
+needs_arm = pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None, reason="arm-none-eabi-gcc not installed")
+
+
+def compile_c(cc: str, source: Path, include: list[Path], extra=(), out: Path | None = None) -> subprocess.CompletedProcess:
+    out = out or source.with_suffix(".o")
+    cmd = [cc, *WARN, *extra, *[f"-I{d}" for d in include], "-c", str(source), "-o", str(out)]
+    return subprocess.run(cmd, capture_output=True, text=True)
+
+
+def headers() -> dict[str, Path]:
+    return {"committed": paths.COMMITTED_HEADER, "n2": header_path(("rod.edges=2",)),
+            "n20": header_path(("rod.edges=20",))}
+
+
+@pytest.mark.parametrize("which", ["committed", "n2", "n20"])
+def test_core_and_sil_compile_warning_free_on_the_host(which, tmp_path):
+    inc = [headers()[which].parent, paths.CORE_SRC, SIL]
+    for src in [*sorted(paths.CORE_SRC.glob("*.c")), SIL / "rod_sil.c"]:
+        r = compile_c("gcc", src, inc, ["-O2"], tmp_path / (src.stem + ".o"))
+        assert r.returncode == 0 and not r.stderr, f"{src.name}: {r.stderr}"
+
+
+@needs_arm
+@pytest.mark.parametrize("which", ["committed", "n20"])
+def test_core_builds_for_the_m4f_without_soft_double(which):
+    build = target_build.build(headers()[which])
+    assert {"rod_observer.o", "rod_control.o", "rod_device.o", "rod_angle.o", "rod_motor.o"} <= set(build.objects)
+    assert build.flash_bytes > 1000
+    assert build.ram_bytes >= build.device_bytes > 0
+
+
+@needs_arm
+def test_soft_double_check_catches_a_double(tmp_path):
+    src = tmp_path / "bad.c"
+    src.write_text("double twice(double x) { return 2.0 * x; }\nfloat f(float x) { return (float)twice(x); }\n")
+    r = subprocess.run(["arm-none-eabi-gcc", "-std=c11", *ARM, "-c", str(src), "-o", str(tmp_path / "bad.o")],
+                       capture_output=True, text=True)
+    assert r.returncode == 0
+    with pytest.raises(UserError, match="__aeabi_d"):
+        target_build.check_no_soft_double([tmp_path / "bad.o"])
+
+
+def stale_header(tmp_path: Path, edit) -> Path:
+    text = paths.COMMITTED_HEADER.read_text()
+    new = edit(text)
+    assert new != text
+    d = tmp_path / "hdr"
+    d.mkdir()
+    (d / "rod_gains.h").write_text(new)
+    src = tmp_path / "uses_config.c"
+    src.write_text('#include "rod_config.h"\nint rod_config_probe;\n')
+    return d
+
+
+@pytest.mark.parametrize("cc", ["gcc", "arm-none-eabi-gcc"])
+def test_stale_schema_version_stops_the_build(cc, tmp_path):
+    if shutil.which(cc) is None:
+        pytest.skip(f"{cc} not installed")
+    d = stale_header(tmp_path, lambda t: re.sub(r"(#define ROD_GAINS_SCHEMA_VERSION\s+)1", r"\g<1>2", t))
+    r = compile_c(cc, tmp_path / "uses_config.c", [d, paths.CORE_SRC])
+    assert r.returncode != 0
+    assert "#error" in r.stderr and "ROD_GAINS_SCHEMA_VERSION" in r.stderr
+
+
+def test_missing_macro_stops_the_build(tmp_path):
+    d = stale_header(tmp_path, lambda t: re.sub(r"#define ROD_SPEED_LIMIT_RAD_S.*\n", "", t))
+    r = compile_c("gcc", tmp_path / "uses_config.c", [d, paths.CORE_SRC])
+    assert r.returncode != 0 and "lacks a macro" in r.stderr
+
+
+def test_default_catch_angle_beyond_the_angle_limit_stops_the_build(tmp_path):
+    d = stale_header(tmp_path, lambda t: re.sub(r"(#define ROD_CATCH_ANGLE_RAD\s+)\S+", r"\g<1>1.2f", t))
+    r = compile_c("gcc", tmp_path / "uses_config.c", [d, paths.CORE_SRC])
+    assert r.returncode != 0 and "catch angle" in r.stderr
+
+
+def test_current_header_compiles(tmp_path):
+    src = tmp_path / "uses_config.c"
+    src.write_text('#include "rod_config.h"\nint rod_config_probe;\n')
+    r = compile_c("gcc", src, [paths.COMMITTED_HEADER.parent, paths.CORE_SRC])
+    assert r.returncode == 0, r.stderr
+
+
+@pytest.mark.parametrize("cxx", ["g++", "arm-none-eabi-g++"])
+def test_board_facing_headers_compile_as_cpp(cxx, tmp_path):
+    """The Teensy sketch is C++: rod_device.h must work there (extern "C", static_assert)."""
+    if shutil.which(cxx) is None:
+        pytest.skip(f"{cxx} not installed")
+    src = tmp_path / "board.cpp"
+    src.write_text('#include "rod_device.h"\nstatic rod_device_t dev;\n'
+                   'void tick(const rod_inputs_t *in, rod_outputs_t *out) { rod_device_step(&dev, in, out); }\n')
+    extra = ARM if cxx.startswith("arm") else []
+    r = subprocess.run([cxx, "-std=gnu++14", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror", *extra,
+                        f"-I{paths.COMMITTED_HEADER.parent}", f"-I{paths.CORE_SRC}", "-c", str(src),
+                        "-o", str(tmp_path / "board.o")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+
+
+def _code_only(text: str) -> str:
+    text = re.sub(r"/\*.*?\*/", " ", text, flags=re.S)
+    text = re.sub(r"//[^\n]*", " ", text)
+    return re.sub(r'"(\\.|[^"\\])*"', '""', text)
+
+
+def test_core_is_portable_float_only_c():
+    for f in sorted(paths.CORE_SRC.glob("*.[ch]")):
+        code = _code_only(f.read_text())
+        assert "Arduino.h" not in f.read_text(), f.name
+        assert not re.search(r"\bdouble\b", code), f"{f.name} uses double"
+        assert not re.search(r"\b(malloc|calloc|realloc|free)\s*\(", code), f"{f.name} allocates"
+        # every floating literal carries an f suffix
+        bare = [m.group(0) for m in re.finditer(r"(?<![\w.])(\d+\.\d*|\.\d+|\d+(?=[eE]))([eE][+-]?\d+)?(?![\w.])", code)]
+        assert not bare, f"{f.name}: unsuffixed float literals {bare[:5]}"
