@@ -1,0 +1,1213 @@
+/* rod_plant.c: the simulated plant (rod + motor + driver + encoder) and the closed-loop runner.
+ *
+ * Why these integrators
+ * ---------------------
+ * Fine rods are stiff. With Table I values (+ the motor's J and b) the linearization has real,
+ * overdamped modes down to -537 rad/s at N = 5 and -5.2e4 rad/s at N = 20 (the inter-edge damping
+ * d acting on edges of tiny inertia m l^2), while the lightly damped (oscillatory) modes stay
+ * below about 170 rad/s at N = 5 and 570 rad/s at N = 20. An explicit method must resolve the
+ * fastest real mode (RK4: h < 2.8/5.2e4 = 5e-5 s at N = 20); an implicit one only the slow ones.
+ * The wrapper (rodctl.sim.plant.choose_integrator) computes both spectra and picks per plant:
+ *
+ * Inextensible rod, stiff (N = 20): ROS2 (Verwer, Spee, Blom, Hundsdorfer 1999), y = (theta, w):
+ *     (I - gamma h A) k1 = F(y_n)
+ *     (I - gamma h A) k2 = F(y_n + h k1) - 2 k1,          gamma = 1 + 1/sqrt(2)
+ *     y_{n+1} = y_n + h (3/2 k1 + 1/2 k2)
+ * It is order 2 for ANY matrix A (a W-method) and L-stable when A is the exact Jacobian, so A
+ * holds just the stiff part: A = [[0, I], [-M^-1 K, -M^-1 D]] with M = M(theta_n),
+ * D = d Lap + (b + back-EMF slope) e1 e1' (exact) and K the exact tridiagonal Hessian of the tan
+ * bending springs. Gravity, Coriolis and dM/dtheta stay explicit (slow). Eliminating the angle
+ * part of each stage leaves one SPD solve per stage,
+ *     (M + gamma h D + gamma^2 h^2 K) k_w = M r_w - gamma h K r_theta,   k_theta = r_theta + gamma h k_w
+ * (M r_w is the generalized force itself at stage 1), plus the stage-2 acceleration
+ * M(theta*)^-1 F(theta*). In joint coordinates (phi_k = theta_k - theta_{k-1}) D and K are
+ * diagonal, so both matrices are "chain inertia + joint armature" and the articulated-body
+ * recursion solves them in O(N) (no N x N matrix is ever formed in a step; see aba_*). Products
+ * with M use its staircase structure, also O(N). sin/cos are taken once per node per step
+ * (stage values by an exact small-angle rotation), cos(theta_i - theta_j) and
+ * tan(phi/2) = sin(phi) / (1 + cos(phi)) come from products. h = 0.1 / omega_osc.
+ * Against Radau (2 s violent swing): 5.4e-4 rad at h = 0.175 ms (N = 20), errors ~ h^2.
+ *
+ * Inextensible rod, mildly stiff (N <= 10 with Table I): classical RK4 with the same O(N) solves,
+ * h = min(2 / max|lambda|, 0.5 / omega_osc, 1 ms): at N = 5 one step per 1 ms period, error 4e-7 rad
+ * (ROS2 needs 2 steps for 1e-3 rad). It is chosen whenever it needs no more steps than ROS2.
+ *
+ * DER: the mass is diagonal and constant, and the undamped stretching modes are NOT stiff in the
+ * "fast but unexcited" sense: the axial fundamental of the soft silicone rod is near 240 rad/s
+ * and centrifugal loading excites it, so an L-stable method that damps it (ROS2) lost accuracy
+ * (1.3e-2 rad at 0.5 ms, N = 5). Velocity Verlet conserves the elastic energy of those modes, so:
+ *     kick 1:  (diag(m) + h/2 C(q_n)) v_half = diag(m) v_n + h/2 (F_el(q_n) + T(v_half) e1)
+ *     drift:   q_{n+1} = q_n + h v_half
+ *     kick 2:  v_{n+1} = v_half + h/2 diag(m)^-1 (F_el(q_{n+1}) - C(q_{n+1}) v_half + T e1)
+ * C(q) = d (Delta W)'(Delta W) + b e1 e1' is the exact damping matrix (edge rates are linear in
+ * the velocities, omega = W(q) qd), banded with half-bandwidth 5 (LDL', no square roots); the
+ * back-EMF and the driver's current clamp enter kick 1 through a scalar equation solved exactly
+ * (Sherman-Morrison). Over two steps the damping sees kick 2 (explicit half) + kick 1 (implicit
+ * half): the trapezoidal rule, A-stable and second order, and quasi-static (forced) damped motion
+ * is reproduced exactly. With d = b = 0 it is velocity Verlet: symplectic, no energy drift.
+ * Stability needs h omega_max < 2 for the undamped frequencies of the elastic part (axial
+ * ~1500 rad/s at N = 5, ~6000 rad/s at N = 20); the wrapper takes h = 1 / omega_max.
+ * Against Radau: 9e-5 rad (N = 5, h = 0.674 ms), 3e-5 rad (N = 20, h = 0.166 ms).
+ *
+ * No allocation after rod_plant_new(); no -ffast-math (NaN must reach the caller).
+ */
+#define _GNU_SOURCE /* sincos */
+#include "rod_plant.h"
+
+#include <math.h>
+#if !defined(__GLIBC__)
+#define sincos(x, s, c) (*(s) = sin(x), *(c) = cos(x))
+#endif
+#include <stddef.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define ROD_GAMMA 1.7071067811865475244 /* 1 + 1/sqrt(2) */
+#define ROD_TWO_PI 6.283185307179586477
+#define DER_BAND 5                      /* half-bandwidth of the DER damping matrix */
+#define DER_BW (DER_BAND + 1)
+#define ROD_MAX_EDGES 1024
+
+typedef struct {
+    double *U;    /* 3N: U_k = I^A_k s_k */
+    double *invD; /* N: 1 / (s_k' I^A_k s_k + arm_k) */
+    double *P;    /* 2(N+1): node positions; joint k sits at node k */
+} aba_factor;
+
+struct rod_plant {
+    rod_plant_config cfg;
+    int N;     /* edges */
+    int n;     /* generalized coordinates */
+    double t;  /* time [s] */
+    double *q; /* coordinates, n */
+    double *v; /* rates, n */
+    double last_torque, last_current;
+    double pending; /* delayed input held by the runner */
+    int prepared;   /* DER: Fc and Cb hold the values at q */
+    /* constants */
+    double ml2, mgl, ks; /* m l^2, m g l, EI / l */
+    double *cc;          /* inextensible: N + 1/2 - i; DER: node masses m_0..m_N */
+    double *md;          /* DER mass diagonal */
+    /* inextensible workspace */
+    double *s, *c, *s2, *c2, *F, *F2, *kj, *ta, *tb, *tc, *td;
+    double *k1q, *k1v, *k2q, *k2v, *th2, *w2, *r2, *ta2, *arm, *mn;
+    aba_factor fS, fM; /* stage-1 S and stage-2 M factors */
+    /* DER workspace */
+    double *Fc, *Cb, *Ab, *x, *w, *vh, *X, *E, *ge, *rr, *rl;
+    double *tmp; /* 2n scratch for deriv/force */
+};
+
+int rod_plant_api_version(void) { return ROD_PLANT_API_VERSION; }
+
+/* ------------------------------------------------------------------------------------------ */
+/* motor and driver                                                                            */
+
+/* Torque for input u at shaft rate omega; *slope = -dT/domega (the back-EMF damping when the
+ * current is not clamped, else 0). Torque mode passes u through. */
+static double motor(const rod_plant *p, double u, double omega, double *current, double *slope)
+{
+    const rod_plant_config *k = &p->cfg;
+    if (k->input_mode == ROD_INPUT_TORQUE) {
+        *current = u / k->kt_out;
+        *slope = 0.0;
+        return u;
+    }
+    double duty = u;
+    if (duty > 1.0) duty = 1.0;
+    if (duty < -1.0) duty = -1.0;
+    double i = (duty * k->supply_voltage - k->ke_out * omega) / k->resistance;
+    double sl = k->kt_out * k->ke_out / k->resistance;
+    if (i > k->current_limit) {
+        i = k->current_limit;
+        sl = 0.0;
+    } else if (i < -k->current_limit) {
+        i = -k->current_limit;
+        sl = 0.0;
+    }
+    *current = i;
+    *slope = sl;
+    return k->kt_out * i;
+}
+
+double rod_plant_motor_torque(const rod_plant *p, double input, double omega, double *current)
+{
+    double cur, slope;
+    double T = motor(p, input, omega, &cur, &slope);
+    if (current) *current = cur;
+    return T;
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* inextensible rod                                                                             */
+
+/* The inner helpers take N as an argument and are always inlined, so rod_step can be
+ * instantiated with N a compile-time constant for small rods (loops unrolled). */
+#define HOT static inline __attribute__((always_inline))
+
+HOT void trig(const double *th, double *s, double *c, const int N)
+{
+    for (int i = 0; i < N; i++) sincos(th[i], s + i, c + i);
+}
+
+/* F = T e1 - C(theta, w) - V(theta) - D w; kj (optional) = bending Hessian per joint.
+ * Coriolis: C_i = m l^2 sum_j c_max(i,j) w_j^2 sin(theta_i - theta_j)
+ *              = m l^2 (s_i stair(w^2 c)_i - c_i stair(w^2 s)_i),
+ * stair(x)_i = sum_j c_max(i,j) x_j = c_i sum_{j<=i} x_j + sum_{j>i} c_j x_j: O(N). */
+HOT void rod_force(rod_plant *p, const int N, const double *s, const double *c, const double *w, double torque,
+                   double *F, double *kj)
+{
+    const double *cc = p->cc;
+    double *a = p->ta, *b = p->tb, *A = p->tc, *B = p->td;
+    double Qa = 0.0, Qb = 0.0;
+    for (int i = N - 1; i >= 0; i--) {
+        const double w2 = w[i] * w[i];
+        a[i] = w2 * c[i];
+        b[i] = w2 * s[i];
+        A[i] = Qa;
+        B[i] = Qb;
+        Qa += cc[i] * a[i];
+        Qb += cc[i] * b[i];
+    }
+    const double ml2 = p->ml2, mgl = p->mgl, ks = p->ks, d = p->cfg.d;
+    double Pa = 0.0, Pb = 0.0;
+    for (int i = 0; i < N; i++) {
+        Pa += a[i];
+        Pb += b[i];
+        const double Ai = A[i] + cc[i] * Pa, Bi = B[i] + cc[i] * Pb;
+        F[i] = -ml2 * (s[i] * Ai - c[i] * Bi) - mgl * cc[i] * s[i];
+    }
+    for (int j = 0; j < N - 1; j++) {
+        const double cp = c[j + 1] * c[j] + s[j + 1] * s[j]; /* cos(phi_j) */
+        const double sp = s[j + 1] * c[j] - c[j + 1] * s[j]; /* sin(phi_j) */
+        const double t = sp / (1.0 + cp);                      /* tan(phi_j / 2) */
+        const double tt = t * t;
+        const double f = 2.0 * ks * t * (1.0 + tt) + d * (w[j + 1] - w[j]);
+        F[j] += f;
+        F[j + 1] -= f;
+        if (kj) kj[j] = ks * (1.0 + tt) * (1.0 + 3.0 * tt);
+    }
+    F[0] += torque - p->cfg.b * w[0];
+}
+
+/* y = M(theta) x in O(N): M_ij = m l^2 c_max(i,j) (c_i c_j + s_i s_j) + J [i = j = 1]. */
+HOT void rod_mass_mul(rod_plant *p, const int N, const double *s, const double *c, const double *x, double *y)
+{
+    const double *cc = p->cc;
+    double *a = p->ta, *b = p->tb, *A = p->tc, *B = p->td;
+    double Qa = 0.0, Qb = 0.0;
+    for (int i = N - 1; i >= 0; i--) {
+        a[i] = c[i] * x[i];
+        b[i] = s[i] * x[i];
+        A[i] = Qa;
+        B[i] = Qb;
+        Qa += cc[i] * a[i];
+        Qb += cc[i] * b[i];
+    }
+    double Pa = 0.0, Pb = 0.0;
+    for (int i = 0; i < N; i++) {
+        Pa += a[i];
+        Pb += b[i];
+        y[i] = p->ml2 * (c[i] * (A[i] + cc[i] * Pa) + s[i] * (B[i] + cc[i] * Pb));
+    }
+    y[0] += p->cfg.J * x[0];
+}
+
+/* Upper triangle of M(theta) (tests only: the step never forms M). */
+static void rod_mass_upper(const rod_plant *p, const double *s, const double *c, double *M)
+{
+    const int N = p->N;
+    for (int i = 0; i < N; i++) {
+        double *Mi = M + (size_t)i * N;
+        const double si = s[i] * p->ml2, ci = c[i] * p->ml2;
+        for (int j = i; j < N; j++) Mi[j] = p->cc[j] * (ci * c[j] + si * s[j]);
+    }
+    M[0] += p->cfg.J;
+}
+
+/* y = K x for the tridiagonal bending Hessian given per joint. */
+HOT void joint_mul(const double *kj, const double *x, double *y, const int N)
+{
+    for (int i = 0; i < N; i++) y[i] = 0.0;
+    for (int j = 0; j < N - 1; j++) {
+        const double f = kj[j] * (x[j] - x[j + 1]);
+        y[j] += f;
+        y[j + 1] -= f;
+    }
+}
+
+/* O(N) solves with M(theta) + diag-in-joint-space terms: the articulated-body algorithm.
+ *
+ * In joint coordinates phi (theta = L phi, L lower-triangular ones: phi_1 = theta_1,
+ * phi_k = theta_k - theta_{k-1}) the damping d Lap, the bending Hessian Delta' diag(k) Delta and
+ * the base terms J, b are all diagonal: L' Lap L = diag(0, 1, ..., 1). So
+ *     L' (M + gh D + gh^2 K) L = M_phi + diag(arm),
+ *     arm_1 = J + gh (b + back-EMF slope),  arm_k = gh d + gh^2 k_{k-1},
+ * and M_phi + diag(arm) is the joint-space inertia of a planar chain (point mass m_k at node k,
+ * revolute joint k at node k-1) with joint armature arm: Featherstone's articulated-body
+ * recursion solves it in O(N) with 3-vectors (omega, v_x, v_y) referred to the axis (world
+ * frame, no transforms). S_theta x = r becomes (M_phi + diag(arm)) z = L' r, x = L z. The
+ * factor pass (inertias) is shared by every right-hand side. M itself carries J as arm_1. */
+HOT void node_positions(const rod_plant *p, const int N, const double *s, const double *c, double *P)
+{
+    const double l = p->cfg.l;
+    double x = 0.0, y = 0.0;
+    P[0] = P[1] = 0.0;
+    for (int k = 0; k < N; k++) {
+        x += l * s[k];
+        y -= l * c[k];
+        P[2 * k + 2] = x;
+        P[2 * k + 3] = y;
+    }
+}
+
+/* Factor pass, fused with the backward half of a first solve of x (x may be NULL).
+ * Written for a short dependency chain (it is latency-bound for small N): D = s' A s is formed
+ * from the carried inertia directly, not from U, and the next body's point mass is added to
+ * the carry before the division resolves. */
+HOT int aba_factor_pass(const rod_plant *p, const int N, const aba_factor *f, const double *arm, const double *x,
+                        double *u)
+{
+    const double *P = f->P, *mn = p->mn;
+    /* articulated inertia of bodies k..N-1 seen at the axis, (omega, vx, vy) order */
+    double rx = P[2 * N], ry = P[2 * N + 1], m = mn[N - 1];
+    double A00 = m * (rx * rx + ry * ry), A01 = -m * ry, A02 = m * rx, A11 = m, A12 = 0.0, A22 = m;
+    double tau = 0.0, p0 = 0.0, p1 = 0.0, p2 = 0.0; /* right-hand side carried likewise */
+    for (int k = N - 1; k >= 0; k--) {
+        const double sy = P[2 * k + 1], sz = -P[2 * k]; /* s = (1, y_k, -x_k): rotation about node k */
+        const double D = (A00 + arm[k]) + (A11 * (sy * sy) + A22 * (sz * sz)) +
+                         2.0 * ((A01 * sy + A02 * sz) + A12 * (sy * sz));
+        const double U0 = A00 + A01 * sy + A02 * sz;
+        const double U1 = A01 + A11 * sy + A12 * sz;
+        const double U2 = A02 + A12 * sy + A22 * sz;
+        if (!(D > 0.0)) return ROD_ERR_NOT_SPD;
+        const double iD = 1.0 / D;
+        f->U[3 * k] = U0;
+        f->U[3 * k + 1] = U1;
+        f->U[3 * k + 2] = U2;
+        f->invD[k] = iD;
+        if (k > 0) { /* parent: its own point mass plus this body's articulated inertia */
+            rx = P[2 * k];
+            ry = P[2 * k + 1];
+            m = mn[k - 1];
+            const double B00 = A00 + m * (rx * rx + ry * ry), B01 = A01 - m * ry, B02 = A02 + m * rx;
+            const double B11 = A11 + m, B22 = A22 + m;
+            const double Q00 = U0 * U0, Q01 = U0 * U1, Q02 = U0 * U2, Q11 = U1 * U1, Q12 = U1 * U2, Q22 = U2 * U2;
+            A00 = B00 - Q00 * iD;
+            A01 = B01 - Q01 * iD;
+            A02 = B02 - Q02 * iD;
+            A11 = B11 - Q11 * iD;
+            A12 = A12 - Q12 * iD;
+            A22 = B22 - Q22 * iD;
+        }
+        if (x) {
+            tau += x[k]; /* (L' r)_k: suffix sums */
+            const double uk = tau - (p0 + sy * p1 + sz * p2);
+            u[k] = uk;
+            const double g = uk * iD;
+            p0 += U0 * g;
+            p1 += U1 * g;
+            p2 += U2 * g;
+        }
+    }
+    return ROD_OK;
+}
+
+/* Forward half: x = L z from the u of a backward half. */
+HOT void aba_forward(const int N, const aba_factor *f, double *x, const double *u)
+{
+    const double *P = f->P, *U = f->U, *iD = f->invD;
+    double a0 = 0.0, a1 = 0.0, a2 = 0.0, th = 0.0;
+    for (int k = 0; k < N; k++) {
+        const double z = (u[k] - (U[3 * k] * a0 + U[3 * k + 1] * a1 + U[3 * k + 2] * a2)) * iD[k];
+        const double sy = P[2 * k + 1], sz = -P[2 * k];
+        a0 += z;
+        a1 += sy * z;
+        a2 += sz * z;
+        th += z; /* x = L z: prefix sums */
+        x[k] = th;
+    }
+}
+
+/* x <- S_theta^-1 x with S_theta = L^-T (M_phi + diag(arm)) L^-1 factored in f; u is scratch (N). */
+HOT void aba_solve(const int N, const aba_factor *f, double *x, double *u)
+{
+    const double *P = f->P, *U = f->U, *iD = f->invD;
+    double tau = 0.0, p0 = 0.0, p1 = 0.0, p2 = 0.0;
+    for (int k = N - 1; k >= 0; k--) {
+        tau += x[k]; /* (L' r)_k: suffix sums */
+        const double sy = P[2 * k + 1], sz = -P[2 * k];
+        const double uk = tau - (p0 + sy * p1 + sz * p2);
+        u[k] = uk;
+        const double g = uk * iD[k];
+        p0 += U[3 * k] * g;
+        p1 += U[3 * k + 1] * g;
+        p2 += U[3 * k + 2] * g;
+    }
+    aba_forward(N, f, x, u);
+}
+
+/* sin/cos of theta + delta from those of theta; polynomials for small delta (error < 1e-18). */
+HOT void trig_shift(const double *s, const double *c, const double *th, const double *delta, double *s2,
+                    double *c2, const int N)
+{
+    for (int i = 0; i < N; i++) {
+        const double d = delta[i];
+        if (fabs(d) < 0.1) {
+            const double d2 = d * d;
+            const double sd =
+                d * (1.0 - d2 * (1.0 / 6.0) * (1.0 - d2 * (1.0 / 20.0) * (1.0 - d2 * (1.0 / 42.0) * (1.0 - d2 * (1.0 / 72.0)))));
+            const double cd =
+                1.0 - d2 * 0.5 * (1.0 - d2 * (1.0 / 12.0) * (1.0 - d2 * (1.0 / 30.0) * (1.0 - d2 * (1.0 / 56.0) * (1.0 - d2 * (1.0 / 90.0)))));
+            s2[i] = s[i] * cd + c[i] * sd;
+            c2[i] = c[i] * cd - s[i] * sd;
+        } else {
+            s2[i] = sin(th[i] + d);
+            c2[i] = cos(th[i] + d);
+        }
+    }
+}
+
+HOT int rod_step_n(rod_plant *p, const int N, double u, double h, double *Tsum, double *Isum)
+{
+    double *th = p->q, *w = p->v;
+    double *s = p->s, *c = p->c, *kj = p->kj, *arm = p->arm;
+    const double gh = ROD_GAMMA * h, d = p->cfg.d;
+    double cur, slope;
+
+    /* stage 1 at y_n: factor S = M + gh D + gh^2 K (joint space) */
+    trig(th, s, c, N);
+    const double T1 = motor(p, u, w[0], &cur, &slope);
+    rod_force(p, N, s, c, w, T1, p->F, kj);
+    node_positions(p, N, s, c, p->fS.P);
+    arm[0] = p->cfg.J + gh * (p->cfg.b + slope);
+    for (int k = 1; k < N; k++) arm[k] = gh * d + gh * gh * kj[k - 1];
+    double *k1q = p->k1q, *k1v = p->k1v, *k2q = p->k2q, *k2v = p->k2v, *tmp = p->r2, *us = p->ta2;
+    joint_mul(kj, w, tmp, N);
+    for (int i = 0; i < N; i++) k1v[i] = p->F[i] - gh * tmp[i];
+    int err = aba_factor_pass(p, N, &p->fS, arm, k1v, us);
+    if (err) return err;
+    aba_forward(N, &p->fS, k1v, us);
+    for (int i = 0; i < N; i++) k1q[i] = w[i] + gh * k1v[i];
+
+    /* stage 2 at y_n + h k1: acceleration M(theta*)^-1 F(theta*) */
+    double *th2 = p->th2, *w2 = p->w2;
+    for (int i = 0; i < N; i++) {
+        th2[i] = h * k1q[i]; /* increment first, for the trig shift */
+        w2[i] = w[i] + h * k1v[i];
+    }
+    trig_shift(s, c, th, th2, p->s2, p->c2, N);
+    for (int i = 0; i < N; i++) th2[i] += th[i];
+    double cur2, slope2;
+    const double T2 = motor(p, u, w2[0], &cur2, &slope2);
+    double *a2 = p->F2;
+    rod_force(p, N, p->s2, p->c2, w2, T2, a2, NULL);
+    node_positions(p, N, p->s2, p->c2, p->fM.P);
+    arm[0] = p->cfg.J;
+    for (int k = 1; k < N; k++) arm[k] = 0.0;
+    err = aba_factor_pass(p, N, &p->fM, arm, a2, us);
+    if (err) return err;
+    aba_forward(N, &p->fM, a2, us);
+    /* r_theta = w2 - 2 k1q (in k2q), r_w = a2 - 2 k1v (in a2) */
+    for (int i = 0; i < N; i++) {
+        k2q[i] = w2[i] - 2.0 * k1q[i];
+        a2[i] -= 2.0 * k1v[i];
+    }
+    rod_mass_mul(p, N, s, c, a2, k2v);
+    joint_mul(kj, k2q, tmp, N);
+    for (int i = 0; i < N; i++) k2v[i] -= gh * tmp[i];
+    aba_solve(N, &p->fS, k2v, us);
+    for (int i = 0; i < N; i++) {
+        k2q[i] += gh * k2v[i];
+        th[i] += h * (1.5 * k1q[i] + 0.5 * k2q[i]);
+        w[i] += h * (1.5 * k1v[i] + 0.5 * k2v[i]);
+    }
+    *Tsum += T1;
+    *Isum += cur;
+    return ROD_OK;
+}
+
+/* Classical RK4 for mildly stiff rods (the wrapper picks it when the whole spectrum fits RK4's
+ * stability region at a step near the control period, e.g. Table I at N = 5: fastest mode
+ * -537 rad/s, stable to h = 5 ms). Each stage: one O(N) articulated-body solve with M. */
+HOT int rod_accel_n(rod_plant *p, const int N, const double *s, const double *c, const double *w, double u,
+                    double *acc, aba_factor *f, double *T, double *cur)
+{
+    double slope;
+    *T = motor(p, u, w[0], cur, &slope);
+    rod_force(p, N, s, c, w, *T, acc, NULL);
+    node_positions(p, N, s, c, f->P);
+    double *arm = p->arm;
+    arm[0] = p->cfg.J;
+    for (int k = 1; k < N; k++) arm[k] = 0.0;
+    const int err = aba_factor_pass(p, N, f, arm, acc, p->ta2);
+    if (err) return err;
+    aba_forward(N, f, acc, p->ta2);
+    return ROD_OK;
+}
+
+HOT int rk4_step_n(rod_plant *p, const int N, double u, double h, double *Tsum, double *Isum)
+{
+    double *th = p->q, *w = p->v, *s = p->s, *c = p->c, *s2 = p->s2, *c2 = p->c2;
+    double *a1 = p->k1v, *a2 = p->k2v, *a3 = p->F, *a4 = p->F2, *w2 = p->w2, *dth = p->th2, *wsum = p->k1q;
+    double T, cur, T2, cur2;
+    trig(th, s, c, N);
+    int err = rod_accel_n(p, N, s, c, w, u, a1, &p->fM, &T, &cur);
+    if (err) return err;
+    for (int i = 0; i < N; i++) { /* stage 2 at y + h/2 k1 */
+        dth[i] = 0.5 * h * w[i];
+        w2[i] = w[i] + 0.5 * h * a1[i];
+        wsum[i] = w[i] + 2.0 * w2[i];
+    }
+    trig_shift(s, c, th, dth, s2, c2, N);
+    err = rod_accel_n(p, N, s2, c2, w2, u, a2, &p->fM, &T2, &cur2);
+    if (err) return err;
+    for (int i = 0; i < N; i++) { /* stage 3 at y + h/2 k2 */
+        dth[i] = 0.5 * h * w2[i];
+        w2[i] = w[i] + 0.5 * h * a2[i];
+        wsum[i] += 2.0 * w2[i];
+    }
+    trig_shift(s, c, th, dth, s2, c2, N);
+    err = rod_accel_n(p, N, s2, c2, w2, u, a3, &p->fM, &T2, &cur2);
+    if (err) return err;
+    for (int i = 0; i < N; i++) { /* stage 4 at y + h k3 */
+        dth[i] = h * w2[i];
+        w2[i] = w[i] + h * a3[i];
+        wsum[i] += w2[i];
+    }
+    trig_shift(s, c, th, dth, s2, c2, N);
+    err = rod_accel_n(p, N, s2, c2, w2, u, a4, &p->fM, &T2, &cur2);
+    if (err) return err;
+    const double h6 = h / 6.0;
+    for (int i = 0; i < N; i++) {
+        th[i] += h6 * wsum[i];
+        w[i] += h6 * (a1[i] + 2.0 * (a2[i] + a3[i]) + a4[i]);
+    }
+    *Tsum += T;
+    *Isum += cur;
+    return ROD_OK;
+}
+
+static int rk4_step(rod_plant *p, double u, double h, double *Tsum, double *Isum)
+{
+    switch (p->N) { /* compile-time N for small rods: loops unrolled */
+    case 2: return rk4_step_n(p, 2, u, h, Tsum, Isum);
+    case 3: return rk4_step_n(p, 3, u, h, Tsum, Isum);
+    case 4: return rk4_step_n(p, 4, u, h, Tsum, Isum);
+    case 5: return rk4_step_n(p, 5, u, h, Tsum, Isum);
+    case 6: return rk4_step_n(p, 6, u, h, Tsum, Isum);
+    case 8: return rk4_step_n(p, 8, u, h, Tsum, Isum);
+    default: return rk4_step_n(p, p->N, u, h, Tsum, Isum);
+    }
+}
+
+static int rod_step(rod_plant *p, double u, double h, double *Tsum, double *Isum)
+{
+    switch (p->N) { /* compile-time N for small rods: loops unrolled */
+    case 2: return rod_step_n(p, 2, u, h, Tsum, Isum);
+    case 3: return rod_step_n(p, 3, u, h, Tsum, Isum);
+    case 4: return rod_step_n(p, 4, u, h, Tsum, Isum);
+    case 5: return rod_step_n(p, 5, u, h, Tsum, Isum);
+    case 6: return rod_step_n(p, 6, u, h, Tsum, Isum);
+    case 8: return rod_step_n(p, 8, u, h, Tsum, Isum);
+    case 10: return rod_step_n(p, 10, u, h, Tsum, Isum);
+    default: return rod_step_n(p, p->N, u, h, Tsum, Isum);
+    }
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* DER: coordinates q = [phi, x_2, y_2, ..., x_N, y_N]                                          */
+
+static inline int node_index(int k) { return 1 + 2 * (k - 2); } /* k >= 2 */
+
+/* Node positions X (2(N+1)) and edges E (2N, E[2(k-1)] = x_k - x_{k-1}). */
+static void der_geometry(const rod_plant *p, const double *q, double *X, double *E)
+{
+    const int N = p->N;
+    const double l = p->cfg.l;
+    X[0] = 0.0;
+    X[1] = 0.0;
+    X[2] = l * sin(q[0]);
+    X[3] = -l * cos(q[0]);
+    for (int k = 2; k <= N; k++) {
+        X[2 * k] = q[node_index(k)];
+        X[2 * k + 1] = q[node_index(k) + 1];
+    }
+    for (int k = 1; k <= N; k++) {
+        E[2 * (k - 1)] = X[2 * k] - X[2 * (k - 1)];
+        E[2 * (k - 1) + 1] = X[2 * k + 1] - X[2 * (k - 1) + 1];
+    }
+}
+
+static inline void band_add(double *B, int i, int j, double val)
+{
+    if (i < j) {
+        int t = i;
+        i = j;
+        j = t;
+    }
+    B[(size_t)i * DER_BW + (i - j)] += val;
+}
+
+/* Elastic + gravity force Fc(q) = -dE/dq and the damping matrix C(q) (band, lower). */
+static void der_prepare(rod_plant *p, const double *q, double *Fc, double *Cb)
+{
+    const int N = p->N, n = p->n;
+    const double l = p->cfg.l, EA = p->cfg.EA, EI_l = p->ks, d = p->cfg.d, g = p->cfg.g;
+    double *X = p->X, *E = p->E, *ge = p->ge, *rr = p->rr, *rl = p->rl;
+    der_geometry(p, q, X, E);
+    const double tx = l * cos(q[0]), ty = l * sin(q[0]); /* d x_1 / d phi */
+    double *irr = rr;                                    /* 1 / |e|^2 */
+    double *ir = rl;                                     /* 1 / |e| */
+    for (int k = 0; k < N; k++) {
+        const double ex = E[2 * k], ey = E[2 * k + 1];
+        const double r = sqrt(ex * ex + ey * ey);
+        ir[k] = 1.0 / r;
+        irr[k] = ir[k] * ir[k];
+        ge[2 * k] = 0.0;
+        ge[2 * k + 1] = 0.0;
+    }
+    for (int k = 1; k < N; k++) { /* stretching of edges 2..N: EA (r/l - 1) t = EA (1/l - 1/r) e */
+        const double f = EA * (1.0 / l - ir[k]);
+        ge[2 * k] += f * E[2 * k];
+        ge[2 * k + 1] += f * E[2 * k + 1];
+    }
+    for (int j = 0; j < N - 1; j++) { /* bending at the node between edges j and j+1 (0-based) */
+        const double ax = E[2 * j], ay = E[2 * j + 1], bx = E[2 * j + 2], by = E[2 * j + 3];
+        const double cr = ax * by - ay * bx;
+        const double ra = ir[j] / ir[j + 1], rb = ir[j + 1] / ir[j]; /* |b| / |a|, |a| / |b| */
+        const double sd = 1.0 / (ir[j] * ir[j + 1]) + ax * bx + ay * by;
+        const double isd = 1.0 / sd;
+        const double kap = 2.0 * cr * isd;
+        const double f = EI_l * kap * 2.0 * isd * isd;
+        const double dsax = ra * ax + bx, dsay = ra * ay + by;
+        const double dsbx = rb * bx + ax, dsby = rb * by + ay;
+        /* dk/da = 2 (-perp(b) s - c ds/da) / s^2, dk/db = 2 (perp(a) s - c ds/db) / s^2, perp(v) = (-vy, vx) */
+        ge[2 * j] += f * (by * sd - cr * dsax);
+        ge[2 * j + 1] += f * (-bx * sd - cr * dsay);
+        ge[2 * j + 2] += f * (-ay * sd - cr * dsbx);
+        ge[2 * j + 3] += f * (ax * sd - cr * dsby);
+    }
+    /* node gradient gx_k = ge_k - ge_{k+1} + gravity; Fc = -(gradient in q) */
+    for (int k = 1; k <= N; k++) {
+        double gx = ge[2 * (k - 1)], gy = ge[2 * (k - 1) + 1] + g * p->cc[k];
+        if (k < N) {
+            gx -= ge[2 * k];
+            gy -= ge[2 * k + 1];
+        }
+        if (k == 1) {
+            Fc[0] = -(gx * tx + gy * ty);
+        } else {
+            Fc[node_index(k)] = -gx;
+            Fc[node_index(k) + 1] = -gy;
+        }
+    }
+    /* damping: rows rho_j = d(omega_{j+1} - omega_j)/dqd, C = d sum rho rho' + b e1 e1'.
+     * d omega_k / d x_k = perp(e_k) / |e_k|^2 = -d omega_k / d x_{k-1}. */
+    memset(Cb, 0, sizeof(double) * (size_t)n * DER_BW);
+    Cb[0] = p->cfg.b;
+    if (d > 0.0) {
+        for (int j = 1; j <= N - 1; j++) { /* 1-based edges j, j+1 meet at node j */
+            const double pax = -E[2 * (j - 1) + 1] * irr[j - 1], pay = E[2 * (j - 1)] * irr[j - 1];
+            const double pbx = -E[2 * j + 1] * irr[j], pby = E[2 * j] * irr[j];
+            /* node j-1: +pa; node j: -(pa + pb); node j+1: +pb */
+            const double v[6] = {pax, pay, -(pax + pbx), -(pay + pby), pbx, pby};
+            if (j >= 3) { /* nodes j-1..j+1 are free: 6 consecutive coordinates from x_{j-1} */
+                double *B0 = Cb + (size_t)node_index(j - 1) * DER_BW;
+                for (int a = 0; a < 6; a++) {
+                    const double da = d * v[a];
+                    for (int b2 = 0; b2 <= a; b2++) B0[a * DER_BW + (a - b2)] += da * v[b2];
+                }
+                continue;
+            }
+            int idx[6];
+            double val[6];
+            int m = 0;
+            for (int a = 0; a < 3; a++) {
+                const int k = j - 1 + a;
+                if (k == 0) continue;
+                if (k == 1) {
+                    idx[m] = 0;
+                    val[m++] = v[2 * a] * tx + v[2 * a + 1] * ty;
+                } else {
+                    idx[m] = node_index(k);
+                    val[m++] = v[2 * a];
+                    idx[m] = node_index(k) + 1;
+                    val[m++] = v[2 * a + 1];
+                }
+            }
+            for (int a = 0; a < m; a++)
+                for (int b2 = a; b2 < m; b2++) band_add(Cb, idx[a], idx[b2], d * val[a] * val[b2]);
+        }
+    }
+}
+
+/* y = C x for the symmetric band matrix (lower storage). */
+static void band_mul(const double *B, const double *x, double *y, int n)
+{
+    for (int i = 0; i < n; i++) y[i] = B[(size_t)i * DER_BW] * x[i];
+    for (int i = 1; i < n; i++) {
+        const double *Bi = B + (size_t)i * DER_BW;
+        const int kmax = i < DER_BAND ? i : DER_BAND;
+        for (int k = 1; k <= kmax; k++) {
+            const double a = Bi[k];
+            y[i] += a * x[i - k];
+            y[i - k] += a * x[i];
+        }
+    }
+}
+
+/* In place LDL': B (lower band of an SPD matrix) -> unit lower L in B[i][k] = L[i][i-k], k >= 1,
+ * and 1 / D_i in B[i][0]. No square roots; one division per row. */
+static int band_ldl(double *B, int n)
+{
+    double t[DER_BW]; /* t_j = L_ij D_j for the current row */
+    for (int i = 0; i < n; i++) {
+        double *Bi = B + (size_t)i * DER_BW;
+        const int j0 = i - DER_BAND > 0 ? i - DER_BAND : 0;
+        double dsum = Bi[0];
+        for (int j = j0; j < i; j++) {
+            const double *Bj = B + (size_t)j * DER_BW;
+            double sum = Bi[i - j];
+            for (int k = j0; k < j; k++) sum -= t[k - j0] * Bj[j - k];
+            t[j - j0] = sum;
+            const double L = sum * Bj[0];
+            Bi[i - j] = L;
+            dsum -= sum * L;
+        }
+        if (!(dsum > 0.0)) return ROD_ERR_NOT_SPD;
+        Bi[0] = 1.0 / dsum;
+    }
+    return ROD_OK;
+}
+
+/* x <- A^-1 x for A = L D L' from band_ldl. */
+static void band_solve(const double *L, double *x, int n)
+{
+    int i = 0;
+    for (; i < n && i < DER_BAND; i++) {
+        const double *Li = L + (size_t)i * DER_BW;
+        double s = x[i];
+        for (int k = 0; k < i; k++) s -= Li[i - k] * x[k];
+        x[i] = s;
+    }
+    for (; i < n; i++) { /* full band: a balanced sum */
+        const double *Li = L + (size_t)i * DER_BW;
+        x[i] -= ((Li[1] * x[i - 1] + Li[2] * x[i - 2]) + (Li[3] * x[i - 3] + (Li[4] * x[i - 4] + Li[5] * x[i - 5])));
+    }
+    for (i = 0; i < n; i++) x[i] *= L[(size_t)i * DER_BW];
+    for (i = n - 1; i >= 0; i--) {
+        if (i + DER_BAND < n) {
+            const double *L1 = L + (size_t)(i + 1) * DER_BW;
+            x[i] -= ((L1[1] * x[i + 1] + L1[DER_BW + 2] * x[i + 2]) +
+                     (L1[2 * DER_BW + 3] * x[i + 3] + (L1[3 * DER_BW + 4] * x[i + 4] + L1[4 * DER_BW + 5] * x[i + 5])));
+        } else {
+            double s = x[i];
+            for (int k = i + 1; k < n; k++) s -= L[(size_t)k * DER_BW + (k - i)] * x[k];
+            x[i] = s;
+        }
+    }
+}
+
+static int der_step(rod_plant *p, double u, double h, double *Tsum, double *Isum)
+{
+    const int n = p->n;
+    const rod_plant_config *k = &p->cfg;
+    double *q = p->q, *v = p->v, *md = p->md, *Fc = p->Fc, *Cb = p->Cb, *Ab = p->Ab, *x = p->x, *vh = p->vh;
+    const double hh = 0.5 * h;
+    if (!p->prepared) der_prepare(p, q, Fc, Cb);
+    p->prepared = 0;
+    for (int i = 0; i < n * DER_BW; i++) Ab[i] = hh * Cb[i];
+    for (int i = 0; i < n; i++) Ab[(size_t)i * DER_BW] += md[i];
+    int err = band_ldl(Ab, n);
+    if (err) return err;
+    for (int i = 0; i < n; i++) x[i] = md[i] * v[i] + hh * Fc[i];
+    double T, cur;
+    if (k->input_mode == ROD_INPUT_TORQUE) {
+        T = u;
+        cur = u / k->kt_out;
+        x[0] += hh * T;
+        band_solve(Ab, x, n);
+        for (int i = 0; i < n; i++) vh[i] = x[i];
+    } else {
+        /* v_half = x + hh T w with x = A^-1 rhs, w = A^-1 e1 and T = kt sat((V - ke v_half_0) / R):
+         * v_half_0 rises with T (w_0 > 0), so the clamped solution of the scalar equation is the
+         * clamp of the unclamped one. */
+        double *w = p->w;
+        band_solve(Ab, x, n);
+        for (int i = 0; i < n; i++) w[i] = 0.0;
+        w[0] = 1.0;
+        band_solve(Ab, w, n);
+        double duty = u;
+        if (duty > 1.0) duty = 1.0;
+        if (duty < -1.0) duty = -1.0;
+        cur = (duty * k->supply_voltage - k->ke_out * x[0]) / (k->resistance + k->kt_out * k->ke_out * hh * w[0]);
+        if (cur > k->current_limit) cur = k->current_limit;
+        if (cur < -k->current_limit) cur = -k->current_limit;
+        T = k->kt_out * cur;
+        for (int i = 0; i < n; i++) vh[i] = x[i] + hh * T * w[i];
+    }
+    for (int i = 0; i < n; i++) q[i] += h * vh[i];
+    der_prepare(p, q, Fc, Cb);
+    p->prepared = 1;
+    band_mul(Cb, vh, x, n);
+    for (int i = 0; i < n; i++) v[i] = vh[i] + hh * (Fc[i] - x[i]) / md[i];
+    v[0] += hh * T / md[0];
+    *Tsum += T;
+    *Isum += cur;
+    return ROD_OK;
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* lifecycle                                                                                    */
+
+static int config_ok(const rod_plant_config *k)
+{
+    if (!k) return 0;
+    if (k->kind != ROD_PLANT_INEXTENSIBLE && k->kind != ROD_PLANT_DER) return 0;
+    if (k->edges < 2 || k->edges > ROD_MAX_EDGES) return 0;
+    if (k->input_mode != ROD_INPUT_TORQUE && k->input_mode != ROD_INPUT_DUTY) return 0;
+    if (!(k->l > 0 && k->m > 0 && k->EI > 0 && k->d >= 0 && k->g >= 0 && k->J >= 0 && k->b >= 0)) return 0;
+    if (k->kind == ROD_PLANT_DER && !(k->EA > 0)) return 0;
+    if (!(k->kt_out > 0 && k->ke_out >= 0 && k->resistance > 0 && k->supply_voltage >= 0 && k->current_limit > 0))
+        return 0;
+    if (!(k->counts_per_rev > 0 && k->encoder_phase >= 0 && k->encoder_phase < 1)) return 0;
+    if (!(k->max_step > 0 && isfinite(k->max_step))) return 0;
+    if (k->kind == ROD_PLANT_DER ? k->method != ROD_METHOD_VERLET
+                                 : (k->method != ROD_METHOD_ROS2 && k->method != ROD_METHOD_RK4))
+        return 0;
+    return 1;
+}
+
+rod_plant *rod_plant_new(const rod_plant_config *cfg)
+{
+    if (!config_ok(cfg)) return NULL;
+    const int N = cfg->edges;
+    const int n = cfg->kind == ROD_PLANT_DER ? 2 * N - 1 : N;
+    /* one block: struct, then doubles */
+    size_t nd = 0;
+    nd += 2 * (size_t)n;                  /* q, v */
+    nd += (size_t)N + 1;                  /* cc */
+    nd += (size_t)n;                      /* md */
+    nd += 21 * (size_t)N;                 /* inextensible vectors, s .. mn */
+    nd += 2 * (6 * (size_t)N + 2);        /* two ABA factors */
+    nd += 2 * (size_t)n * DER_BW;         /* Cb, Ab */
+    nd += 4 * (size_t)n;                  /* Fc, x, w, vh */
+    nd += 2 * ((size_t)N + 1);            /* X */
+    nd += 2 * (size_t)N * 2;              /* E, ge */
+    nd += 2 * (size_t)N;                  /* rr, rl */
+    nd += 4 * (size_t)n;                  /* tmp */
+    rod_plant *p = calloc(1, sizeof(rod_plant) + nd * sizeof(double) + 64);
+    if (!p) return NULL;
+    double *mem = (double *)(void *)((char *)p + ((sizeof(rod_plant) + 63) / 64) * 64);
+#define TAKE(ptr, count) \
+    do {                 \
+        (ptr) = mem;     \
+        mem += (count);  \
+    } while (0)
+    p->cfg = *cfg;
+    p->N = N;
+    p->n = n;
+    TAKE(p->q, n);
+    TAKE(p->v, n);
+    TAKE(p->cc, N + 1);
+    TAKE(p->md, n);
+    TAKE(p->s, N);
+    TAKE(p->c, N);
+    TAKE(p->s2, N);
+    TAKE(p->c2, N);
+    TAKE(p->F, N);
+    TAKE(p->F2, N);
+    TAKE(p->kj, N);
+    TAKE(p->ta, N);
+    TAKE(p->tb, N);
+    TAKE(p->tc, N);
+    TAKE(p->td, N);
+    TAKE(p->k1q, N);
+    TAKE(p->k1v, N);
+    TAKE(p->k2q, N);
+    TAKE(p->k2v, N);
+    TAKE(p->th2, N);
+    TAKE(p->w2, N);
+    TAKE(p->r2, N);
+    TAKE(p->ta2, N);
+    TAKE(p->arm, N);
+    TAKE(p->mn, N);
+    TAKE(p->fS.U, 3 * (size_t)N);
+    TAKE(p->fS.invD, N);
+    TAKE(p->fS.P, 2 * (size_t)N + 2);
+    TAKE(p->fM.U, 3 * (size_t)N);
+    TAKE(p->fM.invD, N);
+    TAKE(p->fM.P, 2 * (size_t)N + 2);
+    TAKE(p->Cb, (size_t)n * DER_BW);
+    TAKE(p->Ab, (size_t)n * DER_BW);
+    TAKE(p->Fc, n);
+    TAKE(p->x, n);
+    TAKE(p->w, n);
+    TAKE(p->vh, n);
+    TAKE(p->X, 2 * (N + 1));
+    TAKE(p->E, 2 * N);
+    TAKE(p->ge, 2 * N);
+    TAKE(p->rr, N);
+    TAKE(p->rl, N);
+    TAKE(p->tmp, 4 * n);
+#undef TAKE
+    p->ml2 = cfg->m * cfg->l * cfg->l;
+    p->mgl = cfg->m * cfg->g * cfg->l;
+    p->ks = cfg->EI / cfg->l;
+    if (cfg->kind == ROD_PLANT_INEXTENSIBLE) {
+        for (int i = 0; i < N; i++) {
+            p->cc[i] = N + 0.5 - (i + 1);
+            p->mn[i] = cfg->m;
+        }
+        p->mn[N - 1] = 0.5 * cfg->m;
+    } else {
+        for (int k = 0; k <= N; k++) p->cc[k] = cfg->m;
+        p->cc[0] = p->cc[N] = 0.5 * cfg->m;
+        p->md[0] = cfg->J + p->cc[1] * cfg->l * cfg->l;
+        for (int k = 2; k <= N; k++) p->md[node_index(k)] = p->md[node_index(k) + 1] = p->cc[k];
+    }
+    for (int i = 0; i < n; i++) p->v[i] = 0.0;
+    if (cfg->kind == ROD_PLANT_DER) {
+        for (int k = 2; k <= N; k++) {
+            p->q[node_index(k)] = 0.0;
+            p->q[node_index(k) + 1] = -k * cfg->l;
+        }
+        p->q[0] = 0.0;
+    }
+    return p;
+}
+
+void rod_plant_free(rod_plant *p) { free(p); }
+
+int rod_plant_kind(const rod_plant *p) { return p->cfg.kind; }
+int rod_plant_edges(const rod_plant *p) { return p->N; }
+int rod_plant_size(const rod_plant *p) { return p->n; }
+double rod_plant_max_step(const rod_plant *p) { return p->cfg.max_step; }
+double rod_plant_time(const rod_plant *p) { return p->t; }
+void rod_plant_set_time(rod_plant *p, double t) { p->t = t; }
+double rod_plant_last_torque(const rod_plant *p) { return p->last_torque; }
+double rod_plant_last_current(const rod_plant *p) { return p->last_current; }
+
+int rod_plant_set_max_step(rod_plant *p, double h)
+{
+    if (!(h > 0 && isfinite(h))) return ROD_ERR_ARGUMENT;
+    p->cfg.max_step = h;
+    return ROD_OK;
+}
+
+int rod_plant_set_method(rod_plant *p, int method)
+{
+    rod_plant_config k = p->cfg;
+    k.method = method;
+    if (!config_ok(&k)) return ROD_ERR_ARGUMENT;
+    p->cfg.method = method;
+    p->prepared = 0;
+    return ROD_OK;
+}
+
+int rod_plant_method(const rod_plant *p) { return p->cfg.method; }
+
+int rod_plant_set_encoder_phase(rod_plant *p, double phase)
+{
+    if (!(phase >= 0 && phase < 1)) return ROD_ERR_ARGUMENT;
+    p->cfg.encoder_phase = phase;
+    return ROD_OK;
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* state                                                                                        */
+
+int rod_plant_set_raw_state(rod_plant *p, const double *q, const double *qd)
+{
+    memcpy(p->q, q, sizeof(double) * (size_t)p->n);
+    memcpy(p->v, qd, sizeof(double) * (size_t)p->n);
+    p->prepared = 0;
+    return ROD_OK;
+}
+
+void rod_plant_get_raw_state(const rod_plant *p, double *q, double *qd)
+{
+    if (q) memcpy(q, p->q, sizeof(double) * (size_t)p->n);
+    if (qd) memcpy(qd, p->v, sizeof(double) * (size_t)p->n);
+}
+
+int rod_plant_set_state(rod_plant *p, const double *theta, const double *dtheta)
+{
+    const int N = p->N;
+    p->prepared = 0;
+    if (p->cfg.kind == ROD_PLANT_INEXTENSIBLE) {
+        memcpy(p->q, theta, sizeof(double) * (size_t)N);
+        memcpy(p->v, dtheta, sizeof(double) * (size_t)N);
+        return ROD_OK;
+    }
+    const double l = p->cfg.l;
+    double x = 0, y = 0, vx = 0, vy = 0;
+    for (int k = 1; k <= N; k++) {
+        const double s = sin(theta[k - 1]), c = cos(theta[k - 1]);
+        x += l * s;
+        y -= l * c;
+        vx += l * dtheta[k - 1] * c;
+        vy += l * dtheta[k - 1] * s;
+        if (k >= 2) {
+            p->q[node_index(k)] = x;
+            p->q[node_index(k) + 1] = y;
+            p->v[node_index(k)] = vx;
+            p->v[node_index(k) + 1] = vy;
+        }
+    }
+    p->q[0] = theta[0];
+    p->v[0] = dtheta[0];
+    return ROD_OK;
+}
+
+static void state_angles(const rod_plant *p, const double *q, const double *qd, double *theta, double *dtheta)
+{
+    const int N = p->N;
+    if (p->cfg.kind == ROD_PLANT_INEXTENSIBLE) {
+        if (theta) memcpy(theta, q, sizeof(double) * (size_t)N);
+        if (dtheta) memcpy(dtheta, qd, sizeof(double) * (size_t)N);
+        return;
+    }
+    const double l = p->cfg.l, sp = sin(q[0]), cp = cos(q[0]);
+    double px = l * sp, py = -l * cp;              /* node k-1 */
+    double pvx = l * qd[0] * cp, pvy = l * qd[0] * sp; /* its velocity */
+    double prev = q[0];
+    if (theta) theta[0] = q[0];
+    if (dtheta) dtheta[0] = qd[0];
+    for (int k = 2; k <= N; k++) {
+        const int i = node_index(k);
+        const double ex = q[i] - px, ey = q[i + 1] - py;
+        const double dx = qd[i] - pvx, dy = qd[i + 1] - pvy;
+        const double ang = atan2(ex, -ey);
+        const double th = prev + remainder(ang - prev, ROD_TWO_PI);
+        if (theta) theta[k - 1] = th;
+        if (dtheta) dtheta[k - 1] = (ex * dy - ey * dx) / (ex * ex + ey * ey);
+        prev = th;
+        px = q[i];
+        py = q[i + 1];
+        pvx = qd[i];
+        pvy = qd[i + 1];
+    }
+}
+
+void rod_plant_get_state(const rod_plant *p, double *theta, double *dtheta)
+{
+    state_angles(p, p->q, p->v, theta, dtheta);
+}
+
+void rod_plant_nodes(const rod_plant *p, double *xy)
+{
+    const int N = p->N;
+    if (p->cfg.kind == ROD_PLANT_DER) {
+        der_geometry(p, p->q, xy, ((rod_plant *)p)->E); /* E is scratch */
+        return;
+    }
+    double x = 0, y = 0;
+    xy[0] = xy[1] = 0.0;
+    for (int k = 1; k <= N; k++) {
+        x += p->cfg.l * sin(p->q[k - 1]);
+        y -= p->cfg.l * cos(p->q[k - 1]);
+        xy[2 * k] = x;
+        xy[2 * k + 1] = y;
+    }
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* model evaluation (tests, linearization, energy)                                              */
+
+int rod_plant_force(rod_plant *p, const double *y, double input, double *F)
+{
+    const int n = p->n;
+    const double *q = y, *qd = y + n;
+    double cur, slope;
+    const double T = motor(p, input, qd[0], &cur, &slope);
+    if (p->cfg.kind == ROD_PLANT_INEXTENSIBLE) {
+        double *s = p->s2, *c = p->c2;
+        trig(q, s, c, p->N);
+        rod_force(p, p->N, s, c, qd, T, F, NULL);
+        return ROD_OK;
+    }
+    p->prepared = 0;
+    der_prepare(p, q, p->Fc, p->Cb);
+    band_mul(p->Cb, qd, p->tmp, n);
+    for (int i = 0; i < n; i++) F[i] = p->Fc[i] - p->tmp[i];
+    F[0] += T;
+    return ROD_OK;
+}
+
+int rod_plant_mass(rod_plant *p, const double *y, double *M)
+{
+    const int n = p->n;
+    memset(M, 0, sizeof(double) * (size_t)n * n);
+    if (p->cfg.kind == ROD_PLANT_DER) {
+        for (int i = 0; i < n; i++) M[(size_t)i * n + i] = p->md[i];
+        return ROD_OK;
+    }
+    trig(y, p->s2, p->c2, n);
+    rod_mass_upper(p, p->s2, p->c2, M);
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < i; j++) M[(size_t)i * n + j] = M[(size_t)j * n + i];
+    return ROD_OK;
+}
+
+int rod_plant_deriv(rod_plant *p, const double *y, double input, double *dy)
+{
+    const int n = p->n;
+    int err = rod_plant_force(p, y, input, dy + n);
+    if (err) return err;
+    memcpy(dy, y + n, sizeof(double) * (size_t)n);
+    if (p->cfg.kind == ROD_PLANT_DER) {
+        for (int i = 0; i < n; i++) dy[n + i] /= p->md[i];
+        return ROD_OK;
+    }
+    node_positions(p, n, p->s2, p->c2, p->fM.P);
+    for (int k = 0; k < n; k++) p->arm[k] = 0.0;
+    p->arm[0] = p->cfg.J;
+    err = aba_factor_pass(p, n, &p->fM, p->arm, dy + n, p->ta2);
+    if (err) return err;
+    aba_forward(n, &p->fM, dy + n, p->ta2);
+    return ROD_OK;
+}
+
+double rod_plant_energy(const rod_plant *cp)
+{
+    rod_plant *p = (rod_plant *)cp; /* uses scratch only */
+    const int N = p->N;
+    const double ks = p->ks;
+    if (p->cfg.kind == ROD_PLANT_INEXTENSIBLE) {
+        double *s = p->s2, *c = p->c2, *Mw = p->F2;
+        trig(p->q, s, c, N);
+        rod_mass_mul(p, N, s, c, p->v, Mw);
+        double kin = 0, bend = 0, grav = 0;
+        for (int i = 0; i < N; i++) {
+            kin += p->v[i] * Mw[i];
+            grav -= p->cc[i] * c[i];
+        }
+        for (int j = 0; j < N - 1; j++) {
+            const double cp2 = c[j + 1] * c[j] + s[j + 1] * s[j], sp = s[j + 1] * c[j] - c[j + 1] * s[j];
+            const double t = sp / (1.0 + cp2);
+            bend += 4.0 * t * t;
+        }
+        return 0.5 * kin + 0.5 * ks * bend + p->cfg.g * p->cfg.m * p->cfg.l * grav;
+    }
+    const int n = p->n;
+    double *X = p->X, *E = p->E;
+    der_geometry(p, p->q, X, E);
+    double kin = 0, st = 0, bend = 0, grav = 0;
+    for (int i = 0; i < n; i++) kin += p->md[i] * p->v[i] * p->v[i];
+    for (int k = 1; k < N; k++) {
+        const double r = sqrt(E[2 * k] * E[2 * k] + E[2 * k + 1] * E[2 * k + 1]);
+        const double e = r / p->cfg.l - 1.0;
+        st += e * e;
+    }
+    for (int j = 0; j < N - 1; j++) {
+        const double ax = E[2 * j], ay = E[2 * j + 1], bx = E[2 * j + 2], by = E[2 * j + 3];
+        const double kap = 2.0 * (ax * by - ay * bx) /
+                           (sqrt(ax * ax + ay * ay) * sqrt(bx * bx + by * by) + ax * bx + ay * by);
+        bend += kap * kap;
+    }
+    for (int k = 0; k <= N; k++) grav += p->cc[k] * X[2 * k + 1];
+    return 0.5 * kin + 0.5 * p->cfg.EA * p->cfg.l * st + 0.5 * ks * bend + p->cfg.g * grav;
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* stepping, encoder                                                                            */
+
+int rod_plant_advance(rod_plant *p, double input, double dt)
+{
+    if (!(dt > 0 && isfinite(dt))) return ROD_ERR_ARGUMENT;
+    /* max_step may be exceeded by 1 ppm: a float control period (0.001f = 1.00000005e-3 s) must
+     * not double the work */
+    double steps = ceil(dt / p->cfg.max_step * (1.0 - 1e-6));
+    if (steps < 1) steps = 1;
+    if (steps > 1e9) return ROD_ERR_ARGUMENT;
+    const long ns = (long)steps;
+    const double h = dt / (double)ns;
+    double Tsum = 0.0, Isum = 0.0;
+    int err = ROD_OK;
+    long k = 0;
+    const int method = p->cfg.method;
+    for (; k < ns && !err; k++) {
+        if (method == ROD_METHOD_VERLET) err = der_step(p, input, h, &Tsum, &Isum);
+        else if (method == ROD_METHOD_RK4) err = rk4_step(p, input, h, &Tsum, &Isum);
+        else err = rod_step(p, input, h, &Tsum, &Isum);
+    }
+    p->last_torque = Tsum / (double)k;
+    p->last_current = Isum / (double)k;
+    p->t += dt;
+    return err;
+}
+
+int32_t rod_plant_encoder_count(const rod_plant *p, double theta1)
+{
+    const double x = floor(theta1 * (p->cfg.counts_per_rev / ROD_TWO_PI) + p->cfg.encoder_phase);
+    if (!isfinite(x)) return INT32_MIN;
+    if (x >= 2147483647.0) return INT32_MAX;
+    if (x <= -2147483648.0) return INT32_MIN;
+    return (int32_t)x;
+}
+
+int32_t rod_plant_encoder(const rod_plant *p) { return rod_plant_encoder_count(p, p->q[0]); }
+
+/* ------------------------------------------------------------------------------------------ */
+/* closed loop                                                                                  */
+
+int64_t rod_run_closed_loop(rod_plant *p, const rod_sil_api *api, const rod_run_options *opt,
+                            const rod_run_log *log, rod_run_result *result)
+{
+    rod_run_result res = {0, 0, 0, ROD_OK};
+    if (!p || !api || !opt || !log) return ROD_ERR_ARGUMENT;
+    if (!api->step || !api->status) return ROD_ERR_ABI;
+    if (opt->reset && (!api->reset || (opt->arm_mode != 0 && !api->arm))) return ROD_ERR_ABI;
+    if (p->cfg.input_mode == ROD_INPUT_DUTY && !api->duty) return ROD_ERR_ABI;
+    if (opt->periods < 0 || !(opt->period > 0 && isfinite(opt->period))) return ROD_ERR_ARGUMENT;
+    if (opt->est_len < 0 || opt->est_len > ROD_RUN_MAX_EST) return ROD_ERR_ARGUMENT;
+    if (opt->delay_periods != 0 && opt->delay_periods != 1) return ROD_ERR_ARGUMENT;
+    const int N = p->N, ne = opt->est_len, duty_mode = p->cfg.input_mode == ROD_INPUT_DUTY;
+    const double period = opt->period, t0 = p->t;
+    float est[ROD_RUN_MAX_EST];
+    if (opt->reset) {
+        api->reset();
+        p->pending = 0.0;
+        if (opt->arm_mode != 0) api->arm(opt->arm_mode);
+    }
+    for (int64_t k = 0; k < opt->periods; k++) {
+        const int32_t count = rod_plant_encoder(p);
+        if (log->time) log->time[k] = t0 + (double)k * period;
+        state_angles(p, p->q, p->v, log->theta ? log->theta + k * N : NULL, log->dtheta ? log->dtheta + k * N : NULL);
+        const float cmd = api->step(count);
+        const float duty = api->duty ? api->duty() : 0.0f;
+        for (int j = 0; j < ne; j++) est[j] = NAN;
+        const int mode = api->status(est, ne);
+        double input = duty_mode ? (double)duty : (double)cmd;
+        if (!isfinite(input)) {
+            input = 0.0;
+            res.nonfinite_commands++;
+        }
+        double applied = input;
+        if (opt->delay_periods) {
+            applied = p->pending;
+            p->pending = input;
+        }
+        const int err = rod_plant_advance(p, applied, period);
+        p->t = t0 + (double)(k + 1) * period;
+        if (log->est) memcpy(log->est + k * ne, est, sizeof(float) * (size_t)ne);
+        if (log->torque_cmd) log->torque_cmd[k] = cmd;
+        if (log->duty) log->duty[k] = duty;
+        if (log->torque) log->torque[k] = p->last_torque;
+        if (log->current) log->current[k] = p->last_current;
+        if (log->mode) log->mode[k] = mode;
+        if (log->count) log->count[k] = count;
+        res.periods_run = k + 1;
+        if (err) {
+            res.error = err;
+            break;
+        }
+        if (opt->stop_on_mode >= 0 && mode == opt->stop_on_mode) {
+            res.stopped_on_mode = 1;
+            break;
+        }
+    }
+    if (result) *result = res;
+    return res.error ? res.error : res.periods_run;
+}
