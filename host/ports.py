@@ -1,0 +1,34 @@
+"""Finding the board: the Teensy's USB VID:PID, or a --port the user names (pyserial URL or sim://)."""
+
+from __future__ import annotations
+
+from rodgains.errors import UserError
+
+TEENSY_VID = 0x16C0
+TEENSY_PID = 0x0483  # Teensyduino USB serial
+
+
+def _describe(p) -> str:
+    ident = f"{p.vid:04X}:{p.pid:04X}" if p.vid is not None else "no USB id"
+    serial = f" serial {p.serial_number}" if getattr(p, "serial_number", None) else ""
+    return f"{p.device} ({ident}{serial})"
+
+
+def find_port(explicit: str | None = None) -> str:
+    """The port to open: `explicit` when given, else the one Teensy on USB; one clear error otherwise."""
+    if explicit:
+        return explicit
+    from serial.tools import list_ports
+
+    ports = list(list_ports.comports())
+    teensies = [p for p in ports if p.vid == TEENSY_VID and p.pid == TEENSY_PID]
+    if len(teensies) == 1:
+        return teensies[0].device
+    if not teensies:
+        seen = ", ".join(_describe(p) for p in ports) or "none"
+        raise UserError(
+            f"no Teensy found (USB {TEENSY_VID:04X}:{TEENSY_PID:04X}); serial ports seen: {seen}. "
+            "Plug the board in, or pass --port PORT (or --port sim:// for the simulated rod)"
+        )
+    listed = ", ".join(_describe(p) for p in teensies)
+    raise UserError(f"{len(teensies)} Teensy boards found: {listed}; choose one with --port")

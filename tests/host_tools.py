@@ -1,0 +1,109 @@
+"""Helpers for the host tests: run rodctl as a user would, start `rodctl sim-device --pty`, watch a port.
+
+Not a test module. No mocks: every helper runs the real rodctl code against the virtual board
+(sim:// in-process or `rodctl sim-device` in another process on a pseudo-terminal).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+
+from rodctl import protocol as P
+
+RODCTL = [sys.executable, "-m", "rodctl.cli"]
+
+
+def rodctl_env(**extra) -> dict:
+    env = dict(os.environ)
+    env.pop("RODCTL_DEBUG", None)
+    env.setdefault("MPLBACKEND", "Agg")
+    env.update(extra)
+    return env
+
+
+def run_rodctl(*args, timeout: float = 120, env: dict | None = None, input: str | None = None):
+    """Run `rodctl ARGS` in a subprocess; returns CompletedProcess (text)."""
+    return subprocess.run([*RODCTL, *args], capture_output=True, text=True, timeout=timeout,
+                          env=env or rodctl_env(), input=input)
+
+
+def start_rodctl(*args, env: dict | None = None, **kw) -> subprocess.Popen:
+    return subprocess.Popen([*RODCTL, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env or rodctl_env(), **kw)
+
+
+@contextmanager
+def sim_device(*args, startup_timeout: float = 60):
+    """`rodctl sim-device --pty ARGS` in another process; yields (Popen, /dev/pts path)."""
+    proc = start_rodctl("sim-device", "--pty", *args)
+    try:
+        lines = []
+        deadline = time.monotonic() + startup_timeout
+        while time.monotonic() < deadline:
+            line = proc.stdout.readline()
+            if not line:
+                break
+            lines.append(line.strip())
+            if line.startswith("/dev/"):
+                break
+        if not lines or not lines[-1].startswith("/dev/"):
+            proc.kill()
+            raise RuntimeError(f"sim-device did not start: {lines} {proc.stderr.read()}")
+        yield proc, lines[-1]
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        for s in (proc.stdout, proc.stderr):
+            if s:
+                s.close()
+
+
+class Listener:
+    """A passive observer on a serial port: reads and decodes, never writes (sends no heartbeat)."""
+
+    def __init__(self, port: str):
+        import serial
+
+        self.ser = serial.Serial(port, 115200, timeout=0.05)
+        self.ser.reset_input_buffer()
+        self.dec = P.Decoder()
+        self.synced = False
+
+    def frames(self, seconds: float):
+        """Frames received over `seconds` (the first partial frame skipped), with their arrival time."""
+        out = []
+        end = time.monotonic() + seconds
+        buf = b""
+        while time.monotonic() < end:
+            data = self.ser.read(self.ser.in_waiting or 1)
+            now = time.monotonic()
+            if not self.synced:
+                buf += data
+                i = buf.find(b"\0")
+                if i < 0:
+                    continue
+                data, self.synced = buf[i + 1:], True
+            out += [(now, f) for f in self.dec.feed(data)]
+        return out
+
+    def wait_for(self, predicate, timeout: float):
+        """(arrival time, frame) of the first frame satisfying predicate, or None."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            for now, f in self.frames(0.02):
+                if predicate(f):
+                    return now, f
+        return None
+
+    def close(self):
+        self.ser.close()

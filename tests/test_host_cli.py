@@ -1,0 +1,198 @@
+"""What a user sees from the CLI: finding the board, build/flash without PlatformIO's platform, plots."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from host_tools import rodctl_env, run_rodctl
+from rodgains.params import load_params
+
+from rodctl import cmd_flash, ports
+from rodctl import protocol as P
+from rodctl.cmd_plot import PANELS, make_figure, shape_nodes
+from rodctl.logfile import LogWriter, read_log, simulator_metadata
+
+
+def _teensies():
+    from serial.tools import list_ports
+
+    return [p for p in list_ports.comports() if p.vid == ports.TEENSY_VID and p.pid == ports.TEENSY_PID]
+
+
+def _one_error_line(r) -> str:
+    assert "Traceback" not in r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1, r.stderr
+    return lines[0]
+
+
+# ---- finding the board ------------------------------------------------------------------------
+
+@pytest.mark.skipif(bool(_teensies()), reason="a Teensy is plugged in")
+def test_no_board_is_one_line_naming_what_was_seen():
+    r = run_rodctl("status")
+    assert r.returncode == 1
+    line = _one_error_line(r)
+    assert line.startswith("rodctl: no Teensy found (USB 16C0:0483); serial ports seen: ")
+    assert "--port sim://" in line
+
+
+def test_explicit_port_is_used_as_given():
+    assert ports.find_port("sim://?edges=7") == "sim://?edges=7"
+    assert ports.find_port("/dev/ttyACM9") == "/dev/ttyACM9"
+
+
+def test_missing_explicit_port_is_one_line():
+    r = run_rodctl("status", "--port", "/dev/ttyNOPE0")
+    assert r.returncode == 1
+    assert _one_error_line(r).startswith("rodctl: cannot open /dev/ttyNOPE0: no such port")
+
+
+@pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
+def test_a_port_without_the_firmware_is_named_as_such():
+    import tty
+
+    master, slave = os.openpty()  # a serial device where nothing answers
+    tty.setraw(slave)
+    try:
+        r = run_rodctl("status", "--port", os.ttyname(slave), timeout=60)
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert r.returncode == 1
+    assert "no rodlink frames within 3 s: is the board running the rod firmware" in _one_error_line(r)
+
+
+# ---- build / flash ------------------------------------------------------------------------------
+
+def _no_teensy_platform() -> bool:
+    return not cmd_flash.platform_installed("teensy") and not cmd_flash.registry_reachable(timeout=2)
+
+
+needs_offline = pytest.mark.skipif(not _no_teensy_platform(), reason="the Teensy platform can be installed here")
+
+
+@needs_offline
+@pytest.mark.parametrize("command", [["build"], ["flash", "--upload-port", "/dev/ttyACM0"]])
+def test_build_and_flash_without_the_platform_is_one_clear_line(command):
+    header = (cmd_flash.paths.COMMITTED_HEADER).read_bytes()
+    r = run_rodctl(*command, timeout=60)
+    assert r.returncode == 1
+    line = _one_error_line(r)
+    assert line.startswith("rodctl: PlatformIO could not install platform teensy (no internet?)")
+    assert "pio pkg install -g -p teensy" in line
+    assert cmd_flash.paths.COMMITTED_HEADER.read_bytes() == header  # nothing touched before failing
+
+
+def test_platformio_output_is_summarized_in_one_line():
+    out = ("Processing teensy35 (platform: teensy; board: teensy35; framework: arduino)\n" + "-" * 40 + "\n"
+           "Platform Manager: Installing teensy\nHTTPClientError: \n")
+    assert cmd_flash.summarize_failure(out, "teensy") == "PlatformIO could not install platform teensy (no internet?)"
+    out = "Compiling .pio/build/teensy35/src/core/rod_angle.c.o\nfirmware/src/core/x.c:3:1: error: expected ';'\n"
+    assert cmd_flash.summarize_failure(out, "teensy") == "firmware/src/core/x.c:3:1: error: expected ';'"
+
+
+def test_platform_names_from_platformio_ini_specs():
+    assert cmd_flash.platform_name("teensy") == "teensy"
+    assert cmd_flash.platform_name("platformio/teensy@^5.0.0") == "teensy"
+    assert cmd_flash.platform_name("https://github.com/platformio/platform-teensy.git") == "teensy"
+
+
+def test_missing_environment_is_one_line(tmp_path):
+    (tmp_path / "platformio.ini").write_text("[env:uno]\nplatform = atmelavr\n")
+    r = run_rodctl("build", "--project-dir", str(tmp_path))
+    assert r.returncode == 1
+    assert _one_error_line(r) == f"rodctl: {tmp_path / 'platformio.ini'} has no [env:teensy35] (environments: uno)"
+
+
+# ---- plots --------------------------------------------------------------------------------------
+
+def _swing_log(path, seconds: float = 2.0):
+    """A log the simulator way: the plant swinging, written through the writer API."""
+    from rodctl.sim.plant import Plant
+
+    p = load_params()
+    plant = Plant(p, input_mode="torque")
+    w = LogWriter(path, simulator_metadata(p))
+    for k in range(int(seconds * 1000)):
+        plant.advance(0.02 * np.sign(np.sin(2 * np.pi * 1.3 * k / 1000)), 1e-3)
+        th, dth = plant.state()
+        w.write_telemetry(P.Telemetry(mode=P.Mode.SWING_UP, reason=0, flags=5, n=p.N, encoder_count=plant.encoder(),
+                                      base_rate=dth[0], torque=0.02, duty=0.1, step_us=50, overruns=0,
+                                      frames_dropped=0, rx_errors=0, theta_hat=tuple(th), rate_hat=tuple(dth)),
+                          seq=k, time_us=1000 * k)
+    w.close()
+    return path
+
+
+def test_plot_writes_a_png_with_every_panel(tmp_path):
+    log = _swing_log(tmp_path / "swing.csv")
+    fig = make_figure(*read_log(log))
+    assert len(fig.axes) == len(PANELS) == 6
+    assert [len(ax.lines) for ax in fig.axes[:4]][0] >= 5  # one line per angle estimate
+    shapes = [ln for ln in fig.axes[4].lines if len(ln.get_xdata()) == 6]
+    assert len(shapes) == 6  # six snapshots of the 5-edge rod (6 nodes)
+    out = tmp_path / "swing.png"
+    r = run_rodctl("plot", str(log), "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    assert out.exists() and out.stat().st_size > 20_000
+    assert r.stdout.startswith(f"wrote {out}: 2000 frames, panels: ")
+
+
+def test_shape_nodes_follow_the_convention():
+    l = 0.031
+    x, y = shape_nodes([0.0, np.pi / 2, np.pi], l)
+    assert np.allclose(x, [0, 0, l, l]) and np.allclose(y, [0, -l, -l, 0])
+
+
+def test_plot_without_a_display_writes_a_file_next_to_the_log(tmp_path):
+    log = _swing_log(tmp_path / "run.csv", seconds=0.5)
+    env = rodctl_env()
+    env.pop("DISPLAY", None)
+    env.pop("WAYLAND_DISPLAY", None)
+    r = run_rodctl("plot", str(log), env=env)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "run.png").stat().st_size > 0
+    assert f"no display: writing {tmp_path / 'run.png'}" in r.stderr
+
+
+def test_live_plot_on_a_headless_machine_is_a_clear_message():
+    env = rodctl_env()
+    env.pop("DISPLAY", None)
+    env.pop("WAYLAND_DISPLAY", None)
+    r = run_rodctl("plot", "--live", "--port", "sim://", env=env)
+    assert r.returncode == 1
+    line = _one_error_line(r)
+    assert line.startswith("rodctl: plot --live needs a display: no display (DISPLAY is not set).")
+    assert "rodctl log --port sim:// --out run.csv" in line
+
+
+def test_live_plot_with_the_agg_backend_is_a_clear_message():
+    r = run_rodctl("plot", "--live", "--port", "sim://", env=rodctl_env(DISPLAY=":0", MPLBACKEND="Agg"))
+    assert r.returncode == 1
+    assert "cannot open windows" in _one_error_line(r)
+
+
+def _xvfb() -> bool:
+    import shutil
+
+    try:
+        import tkinter  # noqa: F401
+    except ImportError:
+        return False
+    return shutil.which("xvfb-run") is not None
+
+
+@pytest.mark.skipif(not _xvfb(), reason="needs xvfb-run and tkinter")
+def test_live_plot_runs_in_a_window_under_a_virtual_display():
+    import subprocess
+
+    env = rodctl_env()
+    env.pop("MPLBACKEND", None)
+    r = subprocess.run(["xvfb-run", "-a", *__import__("host_tools").RODCTL, "plot", "--live", "--port", "sim://",
+                        "--duration", "2"], capture_output=True, text=True, timeout=120, env=env)
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr

@@ -1,0 +1,202 @@
+"""The session and the one-shot commands against the virtual board (sim://, the real protocol path)."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import pytest
+
+from host_tools import run_rodctl
+from rodgains.errors import UserError
+
+from rodctl import cli
+from rodctl import protocol as P
+from rodctl.link import SETTINGS, Session, parse_assignment
+
+
+@pytest.fixture
+def session():
+    with Session("sim://") as s:
+        yield s
+
+
+def test_hello_identifies_the_firmware(session):
+    h = session.hello
+    assert (h.fw_major, h.fw_minor, h.fw_patch) >= (0, 1, 0)
+    assert h.n == 5
+    assert h.period_us == 1000
+    assert bytes(h.header_sha256).hex() == _committed_sha()
+
+
+def _committed_sha() -> str:
+    from rodgains.params import load_params
+
+    return load_params().sha256()
+
+
+def test_telemetry_arrives_at_1khz_with_contiguous_sequence(session):
+    n0, t0 = session.telemetry_seen, time.monotonic()
+    time.sleep(1.0)
+    rate = (session.telemetry_seen - n0) / (time.monotonic() - t0)
+    assert 900 <= rate <= 1100
+    assert session.seq_gaps == 0 and session.counters()["seq_gaps"] == 0
+    assert session.counters()["errors"] == 0
+
+
+def test_status_command_prints_hello_and_one_telemetry(capsys):
+    assert cli.main(["status", "--port", "sim://"]) == 0
+    out = capsys.readouterr().out
+    assert "firmware    0.1.0" in out
+    assert "N=5 at 1000 Hz" in out
+    assert "mode        DISARMED" in out
+    assert "theta_hat [0.0, 0.0, 0.0, 0.0, 0.0] deg" in out
+
+
+def test_set_out_of_range_is_refused_by_the_device_with_the_range(capsys):
+    assert cli.main(["set", "catch_angle_deg=200", "--port", "sim://"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == ("rodctl: device refused catch_angle_deg=200: allowed 0 < catch_angle_deg < 60 deg "
+                   "(the balance angle limit, at most 90 deg)")
+
+
+@pytest.mark.parametrize("text, allowed", [
+    ("swing_amplitude=0.5", "0 <= swing_amplitude <= 0.2 N m"),
+    ("swing_angle_deg=190", "0 < swing_angle_deg <= 180 deg"),
+    ("telemetry_decimation=2.5", "integer 1 <= telemetry_decimation <= 1000"),
+    ("heartbeat_timeout=20", "0.05 <= heartbeat_timeout <= 10 s"),
+])
+def test_every_setting_reports_its_range_when_refused(session, text, allowed):
+    setting, value = parse_assignment(text)
+    with pytest.raises(UserError, match=f"allowed {allowed}"):
+        session.set(setting, value)
+
+
+def test_set_round_trip_changes_what_the_device_reports(session):
+    session.set("swing_angle_deg", 45.0)
+    session.set("swing_amplitude", 0.05)
+    h = session.request_hello()
+    assert h.swing_angle == pytest.approx(math.radians(45.0), rel=1e-6)
+    assert h.swing_amplitude == pytest.approx(0.05, rel=1e-6)
+
+
+def test_telemetry_decimation_slows_the_telemetry(session):
+    session.set("telemetry_decimation", 10)
+    time.sleep(0.05)
+    n0, t0 = session.telemetry_seen, time.monotonic()
+    time.sleep(1.0)
+    rate = (session.telemetry_seen - n0) / (time.monotonic() - t0)
+    assert 85 <= rate <= 115
+
+
+def test_set_command_prints_the_new_value(capsys):
+    assert cli.main(["set", "catch_angle_deg=25", "heartbeat_timeout=1", "--port", "sim://"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out == ["catch_angle_deg = 25 deg (until the board resets)",
+                   "heartbeat_timeout = 1 s (until the board resets)"]
+
+
+def test_unknown_setting_names_the_choices(capsys):
+    assert cli.main(["set", "gain=3", "--port", "sim://"]) == 1
+    err = capsys.readouterr().err
+    assert "unknown setting 'gain'" in err
+    for name in SETTINGS:
+        assert name in err
+
+
+def test_arm_swing_up_drives_the_motor_and_disarm_stops_it(session):
+    ack = session.arm(P.ArmMode.SWING_UP)
+    assert ack.mode == P.Mode.SWING_UP
+    t = session.wait_telemetry()
+    assert t.mode == P.Mode.SWING_UP
+    assert t.flags & P.TelemetryFlag.DRIVER_ENABLED
+    assert abs(t.torque) == pytest.approx(0.01, rel=1e-5)  # eq. (22): the configured amplitude
+    counts = []
+    session.add_listener(lambda f, _t: counts.append(f.msg.encoder_count) if f.type == P.MsgType.TELEMETRY else None,
+                         replay=False)
+    time.sleep(0.5)
+    assert max(abs(c) for c in counts) > 20  # the simulated rod swings (20 counts = 7 deg)
+    ack = session.disarm()
+    assert ack.mode == P.Mode.DISARMED
+    t = session.wait_telemetry()
+    assert (t.mode, t.reason) == (P.Mode.DISARMED, P.Reason.HOST)
+    assert not t.flags & P.TelemetryFlag.DRIVER_ENABLED and t.duty == 0.0
+
+
+def test_heartbeat_keeps_an_armed_device_armed(session):
+    session.arm(P.ArmMode.BALANCE)
+    time.sleep(2.0)  # 4x the heartbeat timeout
+    t = session.wait_telemetry()
+    assert (t.mode, t.reason) == (P.Mode.CATCH, P.Reason.NONE)
+    assert t.flags & P.TelemetryFlag.HEARTBEAT_OK
+
+
+def test_silent_host_faults_and_arm_in_fault_is_refused_naming_clear_fault(session):
+    session.arm(P.ArmMode.BALANCE)
+    with session.heartbeat_paused():
+        t0 = time.monotonic()
+        while session.telemetry.mode != P.Mode.FAULT and time.monotonic() - t0 < 2:
+            time.sleep(0.01)
+        tripped = time.monotonic() - t0
+    assert (session.telemetry.mode, session.telemetry.reason) == (P.Mode.FAULT, P.Reason.HEARTBEAT)
+    assert 0.35 <= tripped <= 0.8
+    with pytest.raises(UserError) as e:
+        session.arm(P.ArmMode.SWING_UP)
+    assert str(e.value) == "device is in FAULT (heartbeat lost): run `rodctl clear-fault`"
+    ack = session.clear_fault()
+    assert ack.mode == P.Mode.DISARMED
+    assert session.arm(P.ArmMode.BALANCE).mode == P.Mode.CATCH
+
+
+def test_two_sim_ports_are_two_independent_boards():
+    with Session("sim://") as a, Session("sim://") as b:
+        a.arm(P.ArmMode.SWING_UP)
+        time.sleep(0.3)
+        assert a.wait_telemetry().mode == P.Mode.SWING_UP
+        assert b.wait_telemetry().mode == P.Mode.DISARMED
+        assert b.telemetry.encoder_count == 0
+
+
+def test_sim_url_options_choose_the_plant():
+    with Session("sim://?plant=der&edges=8") as s:
+        assert s.ser.device.plant.N == 8 and s.ser.device.kind == "der"
+        assert s.hello.n == 5  # the controller's model keeps the parameters' N
+        counts = []
+        s.add_listener(lambda f, _t: counts.append(f.msg.encoder_count) if f.type == P.MsgType.TELEMETRY else None)
+        s.arm(P.ArmMode.SWING_UP)
+        time.sleep(0.3)
+        assert max(abs(c) for c in counts) > 5  # the simulated DER rod moves
+
+
+def test_bad_sim_option_is_one_line(capsys):
+    assert cli.main(["status", "--port", "sim://?plant=rubber"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown plant 'rubber'" in err[0]
+
+
+def test_arm_command_stays_attached_then_disarms(capsys):
+    assert cli.main(["arm", "--balance", "--port", "sim://", "--duration", "1"]) == 0
+    err = capsys.readouterr().err
+    assert "armed balance: mode CATCH" in err
+    assert "disarmed" in err.splitlines()[-1]
+
+
+def test_disarm_and_clear_fault_commands(capsys):
+    assert cli.main(["disarm", "--port", "sim://"]) == 0
+    assert capsys.readouterr().out.strip() == "disarmed: mode DISARMED"
+    assert cli.main(["clear-fault", "--port", "sim://"]) == 0
+    assert capsys.readouterr().out.strip() == "no fault to clear: mode DISARMED"
+
+
+def test_console_session_from_a_script():
+    script = "status\nset catch_angle_deg=200\narm balance\nstatus\nfly\ndisarm\nquit\n"
+    r = run_rodctl("console", "--port", "sim://", input=script, timeout=60)
+    assert r.returncode == 0, r.stderr
+    out = r.stdout
+    assert "mode DISARMED;" in out
+    assert "error: device refused catch_angle_deg=200: allowed 0 < catch_angle_deg < 60 deg" in out
+    assert "armed balance: mode CATCH" in out
+    assert "mode CATCH;" in out
+    assert "error: unknown command 'fly'" in out
+    assert out.rstrip().endswith("disarmed and disconnected")
+    assert "Traceback" not in r.stderr

@@ -1,0 +1,131 @@
+"""rodctl processes against `rodctl sim-device --pty` in another process: kill, Ctrl-C, unplug."""
+
+from __future__ import annotations
+
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from host_tools import Listener, run_rodctl, sim_device, start_rodctl
+
+from rodctl import protocol as P
+from rodctl.logfile import read_log, telemetry
+
+pytestmark = pytest.mark.skipif(not hasattr(__import__("os"), "openpty"), reason="needs pseudo-terminals")
+
+
+def _wait_rows(path, rows: int, timeout: float = 30):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if path.exists():
+            try:
+                _, data = read_log(path)
+                if len(data) >= rows:
+                    return data
+            except Exception:  # noqa: BLE001 - header not written yet
+                pass
+        time.sleep(0.1)
+    raise AssertionError(f"{path}: fewer than {rows} rows after {timeout} s")
+
+
+def test_sim_device_serves_another_rodctl_over_a_pty():
+    with sim_device() as (_, pts):
+        r = run_rodctl("status", "--port", pts)
+        assert r.returncode == 0, r.stderr
+        assert f"port        {pts}" in r.stdout
+        assert "parameters firmware/include/rod_gains.toml" in r.stdout
+        assert "mode        DISARMED" in r.stdout
+
+
+def test_sigkill_of_log_leaves_a_readable_csv_and_a_board_that_disarms_itself(tmp_path):
+    out = tmp_path / "killed.csv"
+    with sim_device() as (dev, pts):
+        log = start_rodctl("log", "--port", pts, "--arm", "balance", "--out", str(out))
+        try:
+            data = _wait_rows(out, 1500)
+            assert telemetry(data)["mode_name"][-1] == "CATCH"  # armed when killed
+            log.send_signal(signal.SIGKILL)
+            t_kill = time.monotonic()
+            log.wait(timeout=10)
+        finally:
+            if log.poll() is None:
+                log.kill()
+            log.communicate()
+        # reconnect passively (no heartbeat of ours) and watch the board trip its watchdog
+        listener = Listener(pts)
+        try:
+            hit = listener.wait_for(lambda f: f.type == P.MsgType.TELEMETRY and f.msg.mode == P.Mode.FAULT, 3.0)
+        finally:
+            listener.close()
+        assert hit is not None, "the board stayed armed without a host"
+        t_fault, frame = hit
+        delay = t_fault - t_kill
+        print(f"\nFAULT (HEARTBEAT) seen {delay:.3f} s after the SIGKILL")
+        assert frame.msg.reason == P.Reason.HEARTBEAT
+        assert not frame.msg.flags & P.TelemetryFlag.DRIVER_ENABLED
+        assert 0.3 <= delay <= 0.5 + 0.3  # the 0.5 s watchdog (the last heartbeat was <= 0.1 s before the kill)
+        # a user reconnecting sees why it stopped
+        r = run_rodctl("status", "--port", pts)
+        assert "mode        FAULT (heartbeat lost): run `rodctl clear-fault`" in r.stdout, (r.stdout, r.stderr)
+
+    meta, data = read_log(out)  # every complete row parses
+    assert meta["incomplete_rows"] == "0"  # whole rows only: the writer never leaves half a line
+    assert len(data) >= 1500
+    assert np.array_equal(data["seq_count"], np.arange(data["seq_count"][0], data["seq_count"][0] + len(data)))
+    assert "closed_utc" not in meta  # no clean close happened
+
+
+def test_ctrl_c_of_log_leaves_a_valid_file_and_disarms(tmp_path):
+    out = tmp_path / "interrupted.csv"
+    with sim_device() as (dev, pts):
+        log = start_rodctl("log", "--port", pts, "--arm", "balance", "--out", str(out))
+        try:
+            _wait_rows(out, 1500)
+            log.send_signal(signal.SIGINT)
+            _, err = log.communicate(timeout=20)
+        finally:
+            if log.poll() is None:
+                log.kill()
+        assert log.returncode == 0, err
+        assert "Traceback" not in err
+        assert err.strip().splitlines()[-1].endswith("; disarmed")
+        # the board: DISARMED by the host, not FAULT, and it stays so with nobody attached
+        time.sleep(0.7)
+        listener = Listener(pts)
+        try:
+            frames = [f for _, f in listener.frames(0.3) if f.type == P.MsgType.TELEMETRY]
+        finally:
+            listener.close()
+        assert frames and all((f.msg.mode, f.msg.reason) == (P.Mode.DISARMED, P.Reason.HOST) for f in frames)
+
+    meta, data = read_log(out)
+    assert meta["end"] == "Ctrl-C" and meta["incomplete_rows"] == "0"
+    assert int(meta["frames"]) == len(data) == int(meta["rows"])
+    assert meta["seq_gaps"] == "0" and meta["device_frames_dropped"] == "0"
+    assert np.array_equal(data["seq_count"], np.arange(data["seq_count"][0], data["seq_count"][0] + len(data)))
+    acks = [a for a in data[data["type_name"] == "ACK"]["info_text"] if not a.startswith("ACK HEARTBEAT")]
+    assert acks[0].startswith("ACK HELLO_REQUEST ") and acks[1].startswith("ACK ARM ") and acks[1].endswith(" OK")
+    assert acks[-1].startswith("ACK DISARM ") and acks[-1].endswith(" OK")  # the disarm is in the log
+
+
+def test_board_lost_mid_log_ends_with_one_line_and_a_closed_file(tmp_path):
+    out = tmp_path / "unplugged.csv"
+    with sim_device() as (dev, pts):
+        log = start_rodctl("log", "--port", pts, "--out", str(out))
+        try:
+            _wait_rows(out, 500)
+            dev.kill()  # the board vanishes (like pulling the USB cable)
+            dev.wait()
+            _, err = log.communicate(timeout=20)
+        finally:
+            if log.poll() is None:
+                log.kill()
+    assert log.returncode == 1
+    lines = err.strip().splitlines()
+    assert lines[-1].startswith(f"rodctl: {pts}: device disconnected")
+    assert "Traceback" not in err
+    meta, data = read_log(out)
+    assert meta["end"] == "error" and "disconnected" in meta
+    assert int(meta["frames"]) == len(data)  # everything received is in the file
