@@ -51,14 +51,19 @@ def test_paper_continuous_K_is_unstable_when_sampled(rate, radius):
 
 
 def test_filter_gain_is_the_current_estimate_form():
-    d = design(load_params())
-    Wd = sampled.sampled_process_noise(d.A, np.diag([0.05] * 5 + [0.01] * 5), d.dt)
-    L, P = sampled.kalman_current(d.Ad, d.C, Wd, np.array([[1.0 / d.dt]]))
+    from rodgains.design import weights
+
+    p = load_params()
+    d = design(p)
+    _, _, W, V = weights(p, d.N)
+    Wd = sampled.sampled_process_noise(d.A, W, d.dt)
+    Vd = V / d.dt  # per-sample variance of a continuous intensity
+    L, P = sampled.kalman_current(d.Ad, d.C, Wd, Vd)
     predictor = d.Ad @ L
     assert np.allclose(d.L, L)
     assert not np.allclose(d.L, predictor)
     # P is the prior covariance: L = P C^T / (C P C^T + V)
-    assert np.allclose(L[:, 0], P[:, 0] / (P[0, 0] + 1.0 / d.dt))
+    assert np.allclose(L[:, 0], P[:, 0] / (P[0, 0] + Vd[0, 0]))
 
 
 def test_sampled_cost_matches_brute_force_quadrature():
@@ -85,8 +90,13 @@ def test_sampled_cost_matches_brute_force_quadrature():
 
 # --- CLI: gains, refusal, header ----------------------------------------------------------------
 
+PAPER_WEIGHTS = ["--set", "lqr.q_angle=0.5", "--set", "lqr.q_rate=0.1", "--set", "observer.process_noise_rate=0.01",
+                 "--set", "observer.measurement_noise=1.0"]
+
+
 def test_unstable_design_is_refused_with_exit_3(tmp_path):
-    r = rodctl("gains", "--set", "design.method=continuous", "--header", str(tmp_path / "h.h"))
+    """The paper's continuous K (its weights) on this testbed's model is unstable at 1 kHz (radius 1.01)."""
+    r = rodctl("gains", "--set", "design.method=continuous", *PAPER_WEIGHTS, "--header", str(tmp_path / "h.h"))
     msg = one_line_error(r, 3)
     assert "spectral radius" in msg
     assert not (tmp_path / "h.h").exists()
@@ -94,7 +104,7 @@ def test_unstable_design_is_refused_with_exit_3(tmp_path):
 
 def test_refused_bare_paper_design_reports_radius_20(tmp_path):
     r = rodctl("gains", "--set", "design.method=continuous", "--set", "motor.design_includes_motor=false",
-               "--header", str(tmp_path / "h.h"))
+               *PAPER_WEIGHTS, "--header", str(tmp_path / "h.h"))
     msg = one_line_error(r, 3)
     radius = float(msg.split("spectral radius ")[1].split()[0])
     assert radius == pytest.approx(20.1, rel=0.02)

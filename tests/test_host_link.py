@@ -9,6 +9,7 @@ import pytest
 
 from host_tools import run_rodctl
 from rodgains.errors import UserError
+from rodgains.params import load_params
 
 from rodctl import cli
 from rodctl import protocol as P
@@ -110,7 +111,8 @@ def test_arm_swing_up_drives_the_motor_and_disarm_stops_it(session):
     t = session.wait_telemetry()
     assert t.mode == P.Mode.SWING_UP
     assert t.flags & P.TelemetryFlag.DRIVER_ENABLED
-    assert abs(t.torque) == pytest.approx(0.01, rel=1e-5)  # eq. (22): the configured amplitude
+    amplitude = load_params()["swing_up"]["amplitude"]
+    assert abs(t.torque) == pytest.approx(amplitude, rel=1e-5)  # eq. (22): the configured amplitude
     counts = []
     session.add_listener(lambda f, _t: counts.append(f.msg.encoder_count) if f.type == P.MsgType.TELEMETRY else None,
                          replay=False)
