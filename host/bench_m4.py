@@ -22,7 +22,10 @@ from rodgains.errors import UserError
 
 from . import paths, target_build
 
-ICOUNT = Path(os.environ.get("ROD_M4_ICOUNT", "/work/shared/tools/m4-icount.sh"))
+# The workplace's QEMU instruction counter: $ROD_M4_ICOUNT, else ../shared/tools beside the checkout.
+ICOUNT_CANDIDATES = [Path(p) for p in (os.environ.get("ROD_M4_ICOUNT", ""),) if p] + [
+    paths.REPO.parent / "shared" / "tools" / "m4-icount.sh", Path("/work/shared/tools/m4-icount.sh")]
+ICOUNT = next((p for p in ICOUNT_CANDIDATES if p.is_file()), ICOUNT_CANDIDATES[0])
 STEPS = 2000
 GOALS = {"m4_step_instructions_n5": 2000, "m4_step_instructions_n20": 15000}
 
@@ -73,7 +76,8 @@ int main(void)
 
 def _icount_tool() -> Path:
     if not ICOUNT.is_file():
-        raise UserError(f"{ICOUNT} not found (set ROD_M4_ICOUNT to the m4-icount.sh script)")
+        raise UserError(f"m4-icount.sh not found (looked in {', '.join(map(str, ICOUNT_CANDIDATES))}); "
+                        "set ROD_M4_ICOUNT to the script")
     return ICOUNT
 
 

@@ -12,7 +12,7 @@ from rodgains.errors import UserError
 from . import __version__
 
 # Subcommand modules, each with register(subparsers); imported lazily-light so `rodctl gains` starts fast.
-COMMAND_MODULES = ["cmd_gains", "cmd_protocol", "cmd_sil", "cmd_device", "cmd_plot", "cmd_flash", "cmd_sim"]
+COMMAND_MODULES = ["cmd_gains", "cmd_protocol", "cmd_sil", "cmd_device", "cmd_plot", "cmd_flash", "cmd_sim", "cmd_bench"]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,16 +1,12 @@
 """The control step fits the Teensy's budget: instruction counts on a Cortex-M4F (QEMU)."""
 
-import shutil
-
 import pytest
 
 from rodctl import bench_m4
 
-pytestmark = pytest.mark.skipif(
-    not bench_m4.ICOUNT.is_file() or shutil.which("qemu-system-arm") is None
-    or shutil.which("arm-none-eabi-gcc") is None,
-    reason="needs m4-icount.sh, qemu-system-arm and arm-none-eabi-gcc",
-)
+# The counter script belongs to the workplace, not this repository; QEMU and the cross compiler are
+# installed by .ci/run, so their absence is a failure, not a skip.
+pytestmark = pytest.mark.skipif(not bench_m4.ICOUNT.is_file(), reason="m4-icount.sh is not on this machine")
 
 
 def test_step_plus_telemetry_encode_meets_the_instruction_goals():
