@@ -82,7 +82,7 @@ def closed_loop(Ad, Bd, C, K, L, Ad_obs=None, Bd_obs=None, actuator_gain: comple
     """
     Ao = Ad if Ad_obs is None else Ad_obs
     Bo = Bd if Bd_obs is None else Bd_obs
-    n, no = Ad.shape[0], Ao.shape[0]
+    no = Ao.shape[0]
     LC = L @ C
     I = np.eye(no)
     top = np.hstack([Ad, -actuator_gain * Bd @ K])

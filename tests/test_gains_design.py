@@ -249,6 +249,7 @@ def test_json_has_the_design_with_documented_shapes(tmp_path):
     Ad, Bd, K = np.array(j["Ad"]), np.array(j["Bd"]), np.array(j["K"])
     assert np.abs(np.linalg.eigvals(Ad - Bd @ K)).max() < 1  # u = -K (x - x_upright)
     A, B = np.array(j["A"]), np.array(j["B"])
+    assert np.allclose(A[:N, N:], np.eye(N))  # state: angles, then their rates
     assert B[N, 0] > 0  # positive torque accelerates theta_1
 
 

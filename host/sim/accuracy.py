@@ -13,7 +13,6 @@ Python model to 1e-11 in tests/test_plant.py), which is ~20x faster for the DER.
 
 from __future__ import annotations
 
-import math
 import time
 from typing import Any
 

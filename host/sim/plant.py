@@ -43,7 +43,9 @@ from typing import Any
 import numpy as np
 
 from rodgains.errors import UserError
+from rodgains.der_model import DERModel
 from rodgains.params import Params, load_params
+from rodgains.rod_model import RodModel
 
 from ..native import compile_shared
 
@@ -263,13 +265,12 @@ class Plant:
             raise ValueError("edges must be >= 2")
         if not 0.0 <= phase < 1.0:
             raise ValueError("phase must be in [0, 1)")
-        r = p["rod"]
-        l = r["length"] / N
+        rod = RodModel.from_params(p, design=False, edges=N)  # the physical rod and motor, whatever the design
         self.params = p
         self.config = PlantConfig(
-            kind=kind, edges=N, input_mode=input_mode, l=l, m=r["density"] * r["width"] * r["thickness"] * l,
-            EI=p.EI, EA=p.EA, d=r["damping"] if d is None else float(d), g=r["gravity"] if g is None else float(g),
-            J=p.base_inertia if J is None else float(J), b=p.base_friction if b is None else float(b),
+            kind=kind, edges=N, input_mode=input_mode, l=rod.l, m=rod.m,
+            EI=rod.EI, EA=p.EA, d=rod.d if d is None else float(d), g=rod.g if g is None else float(g),
+            J=rod.J if J is None else float(J), b=rod.b if b is None else float(b),
             kt_out=p.kt_out, ke_out=p.ke_out, resistance=p["motor"]["resistance"],
             supply_voltage=p["driver"]["supply_voltage"], current_limit=p["driver"]["current_limit"],
             counts_per_rev=float(p.counts_per_rev), encoder_phase=float(phase))
@@ -342,9 +343,6 @@ class Plant:
 
     def model(self):
         """The Python reference model with this plant's values (RodModel or DERModel)."""
-        from rodgains.der_model import DERModel
-        from rodgains.rod_model import RodModel
-
         c = self.config
         if c.kind == "der":
             return DERModel(N=c.edges, l=c.l, m=c.m, EI=c.EI, EA=c.EA, d=c.d, g=c.g, J=c.J, b=c.b)

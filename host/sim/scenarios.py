@@ -154,6 +154,8 @@ def firmware_run(label: str, design: Params, plant: Params, *, theta0, arm_mode:
 
     from .plant import Plant, SilController, run_closed_loop
 
+    if progress:
+        progress(f"{label}: compiling the firmware", 0.0)  # cached after the first build of these parameters
     ctl = SilController(build_sil(design))
     pl = Plant(plant, kind=kind, edges=edges, input_mode=input_mode)
     N = pl.N
