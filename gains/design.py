@@ -81,6 +81,8 @@ class Design:
             "L": self.L.tolist(),
             "observer_form": self.observer_form,
             "method": self.method,
+            "K_continuous": self.K_continuous.tolist(),  # lqr(A, B, Q, R) with this file's weights (Sec. III-A)
+            "L_continuous": self.L_continuous.tolist(),  # lqr(A', C', W, V)' (Sec. III-B), for reference
             "state": [f"theta_{i}" for i in range(1, self.N + 1)] + [f"dtheta_{i}" for i in range(1, self.N + 1)],
             "units": {"state": "rad, rad/s (theta = pi upright)", "input": "base torque at the output shaft [N m]", "dt": "s"},
             "closed_loop_spectral_radius": self.checks.get("closed_loop_spectral_radius"),

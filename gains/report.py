@@ -39,6 +39,7 @@ def paper_continuous_sampled(d: Design, bare: bool) -> dict:
     Ad, Bd = sampled.zoh(A, B, d.dt)
     cont = np.linalg.eigvals(A - B @ K)
     return {
+        "K": K.ravel(),
         "fastest_continuous_pole": float(cont.real.min()),
         "state_feedback_radius": sampled.spectral_radius(Ad - Bd @ K),
         "output_feedback_radius": sampled.spectral_radius(sampled.closed_loop(Ad, Bd, d.C, K, d.L)),
@@ -104,6 +105,7 @@ def report_text(d: Design) -> str:
         f"  modal controllability {d.checks['controllability']:.2e}, observability {d.checks['observability']:.2e}",
         "",
         f"The paper's continuous LQR (its weights, Sec. III) run sampled at {rate:g} Hz:",
+        f"  K (bare rod) = [{', '.join(f'{v:.4g}' for v in bare['K'])}]",
         f"  bare rod of Table I (no motor): fastest continuous pole {bare['fastest_continuous_pole']:.3g} rad/s; "
         f"sampled spectral radius {bare['state_feedback_radius']:.3g} (state feedback), "
         f"{bare['output_feedback_radius']:.3g} (with observer) -> {_verdict(bare['output_feedback_radius'])}",

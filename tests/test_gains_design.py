@@ -246,6 +246,7 @@ def test_json_has_the_design_with_documented_shapes(tmp_path):
                        "K": (1, 10), "L": (10, 1)}.items():
         assert np.array(j[key]).shape == shape, key
     assert j["observer_form"] == "current"
+    assert np.array(j["K_continuous"]).shape == (1, 10) and np.array(j["L_continuous"]).shape == (10, 1)
     Ad, Bd, K = np.array(j["Ad"]), np.array(j["Bd"]), np.array(j["K"])
     assert np.abs(np.linalg.eigvals(Ad - Bd @ K)).max() < 1  # u = -K (x - x_upright)
     A, B = np.array(j["A"]), np.array(j["B"])
