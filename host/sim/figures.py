@@ -6,15 +6,10 @@ import math
 
 import numpy as np
 
+from ..cmd_plot import shape_nodes
 from .scenarios import SETTLE_DEG, Outcome, Trace, resample_edges
 
 COLORS = ["#1f77b4", "#d62728", "#e6a800", "#2ca02c", "#9467bd", "#8c564b"]
-
-
-def _nodes(theta: np.ndarray, l: float) -> tuple[np.ndarray, np.ndarray]:
-    x = np.concatenate([[0.0], np.cumsum(l * np.sin(theta))])
-    y = np.concatenate([[0.0], np.cumsum(-l * np.cos(theta))])
-    return x, y
 
 
 def snapshot_times(tr: Trace, k: int, after: float = 2.0) -> list[int]:
@@ -48,11 +43,11 @@ def make_figure(o: Outcome, snapshots: int = 6):
         ax = fig.add_subplot(gs[0, j])
         for c, tr in enumerate(o.traces):
             kk = min(k, len(tr.t) - 1)
-            x, y = _nodes(tr.theta[kk], tr.edge_length)
+            x, y = shape_nodes(tr.theta[kk], tr.edge_length)
             ax.plot(x, y, "-o", ms=2, lw=1.6, color=COLORS[c % len(COLORS)], label=tr.label if j == 0 else None)
             if tr.est is not None and tr.mode is not None and tr.mode[kk] == 1:
                 n = tr.est.shape[1] // 2
-                xe, ye = _nodes(tr.est[kk, :n], L / n)
+                xe, ye = shape_nodes(tr.est[kk, :n], L / n)
                 ax.plot(xe, ye, "--", lw=1.2, color="k", alpha=0.7, label="estimate" if j == 0 else None)
         ax.set_xlim(-1.1 * L, 1.1 * L)
         ax.set_ylim(-1.1 * L, 1.1 * L)
