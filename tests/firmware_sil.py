@@ -1,7 +1,7 @@
 """ctypes access to the SIL library (firmware core on the host) for the firmware tests.
 
 Not a test module: tests import Sil / Dev from here. The library is built once per parameter
-set by rodctl.sil_build.build_sil (cached by content) and loaded once per process; every test
+set by rodctl.build.sil_build.build_sil (cached by content) and loaded once per process; every test
 resets the device it uses.
 """
 
@@ -13,8 +13,8 @@ from functools import lru_cache
 
 from rodgains.params import load_params
 
-from rodctl import protocol as P
-from rodctl.sil_build import build_sil, write_header
+from rodctl.link import protocol as P
+from rodctl.build.sil_build import build_sil, write_header
 
 MODE = {"DISARMED": 0, "BALANCE": 1, "SWING_UP": 2, "FAULT": 3, "CATCH": 4}
 REASON = {"NONE": 0, "HOST": 1, "ANGLE_LIMIT": 2, "SPEED_LIMIT": 3, "DRIVER_FAULT": 4, "HEARTBEAT": 5,

@@ -13,7 +13,7 @@ import sys
 import time
 from contextlib import contextmanager
 
-from rodctl import protocol as P
+from rodctl.link import protocol as P
 
 RODCTL = [sys.executable, "-m", "rodctl.cli"]
 

@@ -5,7 +5,7 @@
 
 The wire bytes here come from an independent reference encoder written straight from the v1 wire
 specification (explicit struct formats, the textbook COBS loop, a bit-by-bit CRC), not from
-host/protocol.py or the TOML. The script also checks that rodctl.protocol agrees before writing,
+host/rodctl/link/protocol.py or the TOML. The script also checks that rodctl.link.protocol agrees before writing,
 so a mismatch between the TOML layout and the specification stops here. tests/test_protocol.py
 compares both codecs against the committed JSON, never against this script.
 
@@ -214,7 +214,7 @@ def document() -> dict:
 
 def check_against_host_codec(doc: dict) -> None:
     """The TOML-driven codec must agree with the reference; refuse to write vectors otherwise."""
-    from rodctl import protocol as P
+    from rodctl.link import protocol as P
 
     for c in doc["messages"]:
         cls = P.MESSAGE_CLASSES[c["type"]]
@@ -223,11 +223,11 @@ def check_against_host_codec(doc: dict) -> None:
             fields["header_sha256"] = bytes.fromhex(fields["header_sha256"])
         wire = P.encode(cls(**fields), c["seq"], c["time_us"]).hex()
         if wire != c["wire"]:
-            raise SystemExit(f"make_vectors: rodctl.protocol disagrees with the reference on {c['case']}:\n"
+            raise SystemExit(f"make_vectors: rodctl.link.protocol disagrees with the reference on {c['case']}:\n"
                              f"  reference {c['wire']}\n  protocol  {wire}")
     for c in doc["cobs"]:
         if P.cobs_encode(bytes.fromhex(c["data"])).hex() != c["encoded"]:
-            raise SystemExit(f"make_vectors: rodctl.protocol COBS disagrees on {c['case']}")
+            raise SystemExit(f"make_vectors: rodctl.link.protocol COBS disagrees on {c['case']}")
 
 
 def text(doc: dict) -> str:

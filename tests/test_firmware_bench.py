@@ -2,7 +2,7 @@
 
 import pytest
 
-from rodctl import bench_m4
+from rodctl.bench import m4 as bench_m4
 
 # The counter script belongs to the workplace, not this repository; QEMU and the cross compiler are
 # installed by .ci/run, so their absence is a failure, not a skip.

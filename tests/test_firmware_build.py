@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from firmware_sil import header_path
-from rodctl import paths, target_build
+from rodctl import paths
+from rodctl.build import target_build
 from rodgains.errors import UserError
 
 WARN = ["-std=c11", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror"]

@@ -3,7 +3,7 @@
 import pytest
 
 from firmware_sil import MODE, Dev, header_path
-from rodctl import protocol as P
+from rodctl.link import protocol as P
 
 
 def version_from_header() -> tuple[int, int, int]:

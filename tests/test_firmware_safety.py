@@ -5,7 +5,7 @@ import math
 import pytest
 
 from firmware_sil import ACK, MODE, RAD_PER_COUNT, REASON, UPRIGHT, Dev, Sil, count_of
-from rodctl import protocol as P
+from rodctl.link import protocol as P
 
 
 def assert_faulted(dev, reason: str, torque: float) -> None:

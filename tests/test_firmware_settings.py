@@ -5,7 +5,7 @@ import math
 import pytest
 
 from firmware_sil import ACK, MODE, Dev, Sil
-from rodctl import protocol as P
+from rodctl.link import protocol as P
 
 NAN, INF = float("nan"), float("inf")
 

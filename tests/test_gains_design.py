@@ -127,7 +127,7 @@ def test_bad_parameters_give_one_line_and_exit_2(args, needle, tmp_path):
 
 
 def test_missing_and_unknown_keys_in_a_file(tmp_path):
-    text = paths.REPO.joinpath("gains/default.toml").read_text()
+    text = paths.REPO.joinpath("gains/rodgains/default.toml").read_text()
     missing = tmp_path / "missing.toml"
     missing.write_text(text.replace("gravity = 9.81", ""))
     assert "rod.gravity: missing key" in one_line_error(rodctl("gains", "--params", str(missing), "--check"), 2)

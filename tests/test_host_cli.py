@@ -10,10 +10,11 @@ import pytest
 from host_tools import rodctl_env, run_rodctl
 from rodgains.params import load_params
 
-from rodctl import cmd_flash, ports
-from rodctl import protocol as P
-from rodctl.cmd_plot import PANELS, make_figure, shape_nodes
-from rodctl.logfile import LogWriter, read_log, simulator_metadata
+from rodctl.cli import flash as cmd_flash
+from rodctl.link import ports
+from rodctl.link import protocol as P
+from rodctl.cli.plot import PANELS, make_figure, shape_nodes
+from rodctl.logs.logfile import LogWriter, read_log, simulator_metadata
 
 
 def _teensies():

@@ -12,8 +12,8 @@ from rodgains.errors import UserError
 from rodgains.params import load_params
 
 from rodctl import cli
-from rodctl import protocol as P
-from rodctl.link import SETTINGS, Session, parse_assignment
+from rodctl.link import protocol as P
+from rodctl.link.session import SETTINGS, Session, parse_assignment
 
 
 @pytest.fixture

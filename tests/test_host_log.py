@@ -13,8 +13,8 @@ from host_tools import run_rodctl
 from rodgains.params import load_params
 
 from rodctl import paths
-from rodctl import protocol as P
-from rodctl.logfile import (JOURNAL_SUFFIX, LogWriter, columns, device_time_s, identify_params, params_of, read_log,
+from rodctl.link import protocol as P
+from rodctl.logs.logfile import (JOURNAL_SUFFIX, LogWriter, columns, device_time_s, identify_params, params_of, read_log,
                             simulator_metadata, telemetry, theta_hat)
 
 UNIT_SUFFIXES = ("_s", "_us", "_rad", "_rad_s", "_Nm", "_frac", "_count", "_code", "_name", "_bits", "_text")
@@ -98,7 +98,7 @@ def test_the_device_design_is_identified_by_its_header_hash():
 
 def test_unknown_design_is_recorded_as_unknown_with_the_hash(tmp_path):
     hello = P.Hello(0, 1, 0, 1, 5, 0, 0, 1000, 1, 0.01, 0.5, 0.5, 0.5, 0.2, b"\x11" * 32)
-    from rodctl.logfile import device_metadata
+    from rodctl.logs.logfile import device_metadata
 
     meta = device_metadata(hello, port="/dev/ttyACM0")
     assert meta["params_source"] == "unknown" and meta["header_sha256"] == "11" * 32

@@ -10,8 +10,8 @@ import pytest
 
 from host_tools import Listener, run_rodctl, sim_device, start_rodctl
 
-from rodctl import protocol as P
-from rodctl.logfile import read_log, telemetry
+from rodctl.link import protocol as P
+from rodctl.logs.logfile import read_log, telemetry
 
 pytestmark = pytest.mark.skipif(not hasattr(__import__("os"), "openpty"), reason="needs pseudo-terminals")
 

@@ -1,4 +1,4 @@
-"""The C plant (host/sim/native/rod_plant.c) against the Python reference models, and its
+"""The C plant (host/rodctl/sim/native/rod_plant.c) against the Python reference models, and its
 encoder, motor/driver and Python API. Integrator accuracy is in test_plant_integrators.py,
 the closed-loop runner in test_plant_closed_loop.py."""
 
@@ -181,7 +181,7 @@ def test_nan_survives_the_plant():
 
 
 def test_library_builds_with_the_firmware_warning_set():
-    from rodctl.native import FIRMWARE_WARNINGS, compile_shared
+    from rodctl.build.native import FIRMWARE_WARNINGS, compile_shared
     from rodctl.sim.plant import NATIVE, SOURCES
 
     compile_shared("rod_plant_strict", SOURCES, [NATIVE], ("-O2", "-Wshadow", "-pedantic", *FIRMWARE_WARNINGS))

@@ -15,7 +15,7 @@ import pytest
 
 from rodgains.errors import UserError
 from rodgains.params import load_params
-from rodctl.native import compile_shared
+from rodctl.build.native import compile_shared
 from rodctl.sim import plant as sim
 from rodctl.sim.plant import Plant, SilController, SimulationError, measure_realtime_factor, run_closed_loop
 

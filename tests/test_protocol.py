@@ -16,9 +16,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rodctl import cli, paths
-from rodctl import protocol as P
-from rodctl import protocol_gen as gen
-from rodctl.native import FIRMWARE_WARNINGS, compile_shared
+from rodctl.link import protocol as P
+from rodctl.link import protocol_gen as gen
+from rodctl.build.native import FIRMWARE_WARNINGS, compile_shared
 
 CORE = paths.CORE_SRC
 VECTORS = json.loads((Path(__file__).parent / "vectors" / "rodlink_vectors.json").read_text())
@@ -627,14 +627,14 @@ def test_codec_compiles_for_cortex_m4_without_double(tmp_path):
 # ---- speed ---------------------------------------------------------------------------------------
 
 def test_python_decodes_at_least_100k_telemetry_frames_per_second():
-    from rodctl.bench_protocol import measure_decode_rate
+    from rodctl.bench.protocol import measure_decode_rate
 
     rate = measure_decode_rate(seconds=0.6, runs=3)
     assert rate >= 100_000, f"{rate:,.0f} frames/s"
 
 
 def test_telemetry_encode_fits_the_m4_budget(tmp_path):
-    from rodctl.bench_m4 import ICOUNT as ICOUNT_TOOL  # the same search as `rodctl bench`
+    from rodctl.bench.m4 import ICOUNT as ICOUNT_TOOL  # the same search as `rodctl bench`
 
     if not ICOUNT_TOOL.exists():
         pytest.skip("m4-icount.sh is not on this machine")  # qemu and arm gcc come from .ci/run: no skip for those

@@ -121,7 +121,7 @@ def test_a_design_that_ignores_the_motor_fails_on_the_testbed(outcomes):
 
 
 def test_sim_writes_a_device_format_log_and_a_figure(tmp_path):
-    from rodctl import logfile
+    from rodctl.logs import logfile
 
     r = subprocess.run([sys.executable, "-m", "rodctl.cli", "sim", "--scenario", "balance", "--duration", "2",
                         "--plot", str(tmp_path / "b.png"), "--log", str(tmp_path / "b.csv")],

@@ -1,0 +1,65 @@
+"""Build the SIL library: the firmware core + a generated rod_gains.h as a host shared library.
+
+    from rodctl.build.sil_build import build_sil
+    lib = build_sil(load_params(None, ["rod.edges=8"]))   # Path to librodsil-<hash>.so
+
+The header goes into build/sil/<parameters hash>/ (the committed firmware/include/rod_gains.h
+is never touched) and is searched first, so the library runs exactly the gains designed for
+those parameters. The same firmware/src/core sources as the Teensy build are compiled, never a
+copy, with the firmware's warning set. Builds are cached by content (rodctl.build.native).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+from rodctl.build import native
+
+from rodctl import paths
+
+SIL_DIR = paths.FIRMWARE / "sil"
+LIB_NAME = "rodsil"
+
+
+def sil_sources() -> list[Path]:
+    paths.require_firmware_sources()
+    return [SIL_DIR / "rod_sil.c", *sorted(paths.CORE_SRC.glob("*.c"))]
+
+
+def write_header(params, command: str | None = None, out_root: Path | None = None) -> Path:
+    """Design gains for `params` and write their rod_gains.h under build/sil/; returns its folder."""
+    from rodgains.codegen import header_text
+    from rodgains.design import design
+
+    from rodctl.cli.gains import regenerate_command
+
+    if command is None:
+        ns = argparse.Namespace(params=None, overrides=[], header=None)
+        command = regenerate_command(ns)
+    text = header_text(design(params), command)
+    folder = Path(out_root or paths.BUILD / "sil") / params.sha256()[:16]
+    folder.mkdir(parents=True, exist_ok=True)
+    header = folder / "rod_gains.h"
+    if not header.exists() or header.read_text() != text:
+        tmp = header.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(text)
+        os.replace(tmp, header)  # atomic: a concurrent build never sees half a header
+    return folder
+
+
+def build_sil(params=None, command: str | None = None, out_dir: Path | None = None) -> Path:
+    """Path of the SIL shared library for `params` (default parameters when None)."""
+    if params is None:
+        from rodgains.params import load_params
+
+        params = load_params()
+    header_dir = write_header(params, command)
+    return native.compile_shared(
+        LIB_NAME,
+        sil_sources(),
+        include_dirs=[header_dir, paths.CORE_SRC, SIL_DIR],
+        flags=("-O2",) + native.FIRMWARE_WARNINGS,
+        out_dir=out_dir,
+    )

@@ -1,0 +1,114 @@
+"""rodctl bench: the project's performance goals, measured (instruction counts, real-time factors, rates)."""
+
+from __future__ import annotations
+
+import json
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from rodgains.errors import UserError
+
+# key: (goal, "<=" or ">=", unit, what)
+GOALS = {
+    "gains_seconds_n5": (3.0, "<=", "s", "`rodctl gains` for N = 5, wall time with interpreter start"),
+    "gains_seconds_n20": (10.0, "<=", "s", "`rodctl gains` for N = 20, wall time with interpreter start"),
+    "m4_step_instructions_n5": (2000, "<=", "instr", "one control step + its telemetry frame, Cortex-M4F, N = 5"),
+    "m4_step_instructions_n20": (15000, "<=", "instr", "the same, N = 20"),
+    "m4_core_flash_bytes": (None, "", "B", "portable core flash (text + data), N = 5"),
+    "m4_core_ram_bytes": (None, "", "B", "portable core RAM (data + bss), N = 5"),
+    "sil_realtime_factor_n5": (1000, ">=", "x", "SIL firmware + N = 5 inextensible plant at 1 kHz"),
+    "sil_realtime_factor_n20": (50, ">=", "x", "SIL firmware (N = 20) + N = 20 inextensible plant at 1 kHz"),
+    "sil_realtime_factor_der20": (50, ">=", "x", "SIL firmware (N = 20) + N = 20 extensible (DER) plant"),
+    "host_decode_frames_per_s": (100000, ">=", "frames/s", "Python decoder, N = 5 telemetry"),
+}
+
+
+def _gains_seconds(edges: int, repeats: int = 3) -> float:
+    walls = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        r = subprocess.run([sys.executable, "-m", "rodctl.cli", "gains", "--set", f"rod.edges={edges}", "--json",
+                            str(Path("build") / f"bench-gains-n{edges}.json")], capture_output=True, text=True)
+        walls.append(time.perf_counter() - t0)
+        if r.returncode != 0:
+            raise UserError(f"rodctl gains failed: {r.stderr.strip()}")
+    return statistics.median(walls)
+
+
+def _sil_factor(edges: int, kind: str, seconds: float) -> float:
+    from rodgains.params import load_params
+
+    from rodctl.build.sil_build import build_sil
+    from rodctl.sim.plant import Plant, measure_realtime_factor
+
+    p = load_params(overrides=[f"rod.edges={edges}"])
+    plant = Plant(p, kind=kind, edges=edges, input_mode="duty")
+    return float(measure_realtime_factor(plant, build_sil(p), seconds=seconds, repeats=5, arm_mode=2)["factor"])
+
+
+def measure(groups: set[str], quick: bool = False) -> dict:
+    out: dict[str, float] = {}
+    if "gains" in groups:
+        Path("build").mkdir(exist_ok=True)
+        out["gains_seconds_n5"] = round(_gains_seconds(5), 3)
+        out["gains_seconds_n20"] = round(_gains_seconds(20), 3)
+    if "m4" in groups:
+        from rodctl.bench import m4 as bench_m4
+
+        out.update(bench_m4.measure())
+    if "sil" in groups:
+        secs = 2.0 if quick else 10.0
+        out["sil_realtime_factor_n5"] = round(_sil_factor(5, "inextensible", secs), 1)
+        out["sil_realtime_factor_n20"] = round(_sil_factor(20, "inextensible", secs), 1)
+        out["sil_realtime_factor_der20"] = round(_sil_factor(20, "der", secs), 1)
+    if "host" in groups:
+        from rodctl.bench.protocol import measure_decode_rate
+
+        out["host_decode_frames_per_s"] = round(measure_decode_rate(seconds=0.5 if quick else 2.0))
+    return out
+
+
+def verdict(key: str, value: float) -> str:
+    goal, op, _, _ = GOALS[key]
+    if goal is None:
+        return ""
+    ok = value <= goal if op == "<=" else value >= goal
+    return "ok" if ok else "MISSED"
+
+
+def run_bench(args) -> int:
+    groups = set(args.only.split(",")) if args.only else {"gains", "m4", "sil", "host"}
+    unknown = groups - {"gains", "m4", "sil", "host"}
+    if unknown:
+        raise UserError(f"--only {args.only}: unknown group(s) {', '.join(sorted(unknown))}; gains, m4, sil, host")
+    results = {}
+    for g in ("gains", "m4", "sil", "host"):
+        if g in groups:
+            print(f"measuring {g} ...", file=sys.stderr, flush=True)
+            results.update(measure({g}, quick=args.quick))
+    missed = []
+    for key, value in results.items():
+        goal, op, unit, what = GOALS[key]
+        v = verdict(key, value)
+        target = f"(goal {op} {goal:g} {unit})" if goal is not None else ""
+        print(f"{key:28s} {value:>12,.6g} {unit:9s} {target:24s} {v:6s} {what}")
+        if v == "MISSED":
+            missed.append(key)
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=1) + "\n")
+        print(f"wrote {args.json}")
+    return 1 if missed else 0
+
+
+def register(sub) -> None:
+    b = sub.add_parser("bench", help="measure the performance goals (M4 instructions, SIL speed, decode rate)",
+                       description="Measure every performance goal of the project and compare with it. Instruction "
+                                   "counts come from QEMU (../shared/tools/m4-icount.sh); speeds are medians of "
+                                   "repeated runs. Exit 1 when a goal is missed.")
+    b.add_argument("--json", metavar="PATH", help="write the results as JSON")
+    b.add_argument("--only", metavar="GROUPS", help="comma-separated subset of: gains, m4, sil, host")
+    b.add_argument("--quick", action="store_true", help="shorter runs (noisier)")
+    b.set_defaults(func=run_bench)

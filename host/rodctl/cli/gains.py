@@ -1,0 +1,125 @@
+"""rodctl gains / rodctl params: design the sampled-loop gains and write the firmware header."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+from pathlib import Path
+
+from rodgains.errors import UserError
+from rodgains.params import DEFAULT_PARAMS, Params, load_params
+
+from rodctl import paths
+
+
+def add_param_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--params", metavar="FILE", help="parameter file (TOML); default: Table I rod, gains/rodgains/default.toml")
+    p.add_argument("--set", metavar="SECTION.KEY=VALUE", action="append", default=[], dest="overrides",
+                   help="override one parameter, e.g. --set rod.edges=8 (repeatable)")
+
+
+def params_from_args(args) -> Params:
+    return load_params(args.params, args.overrides)
+
+
+def _shown_path(path: str | Path) -> str:
+    """A path as it goes into generated text: relative to the checkout when inside it."""
+    p = Path(path).resolve()
+    try:
+        return str(p.relative_to(paths.REPO))
+    except ValueError:
+        return str(path)
+
+
+def regenerate_command(args) -> str:
+    """The command that regenerates the header, in a form independent of how it was spelled."""
+    parts = ["rodctl", "gains"]
+    if args.params and Path(args.params).resolve() != DEFAULT_PARAMS.resolve():
+        parts += ["--params", _shown_path(args.params)]
+    for o in args.overrides:
+        parts += ["--set", o]
+    if args.header and Path(args.header).resolve() != paths.COMMITTED_HEADER.resolve():
+        parts += ["--header", _shown_path(args.header)]
+    return " ".join(shlex.quote(x) for x in parts)
+
+
+def params_copy_text(p: Params, command: str) -> str:
+    return (
+        "# rod_gains.toml -- DO NOT EDIT: the parameters rod_gains.h was generated from.\n"
+        f"# Regenerate: {command}\n"
+        f"# Inputs SHA-256: {p.sha256()}\n"
+        + p.to_toml()
+    )
+
+
+def generated_files(args) -> tuple[object, dict[Path, str]]:
+    """Design, then the files `rodctl gains` would write: {path: text}."""
+    from rodgains.codegen import header_text
+    from rodgains.design import design
+
+    p = params_from_args(args)
+    d = design(p)
+    command = regenerate_command(args)
+    header = Path(args.header) if args.header else paths.COMMITTED_HEADER
+    files = {header: header_text(d, command), header.with_suffix(".toml"): params_copy_text(p, command)}
+    return d, files
+
+
+def run_gains(args) -> int:
+    d, files = generated_files(args)
+    if args.report:
+        from rodgains.report import report_text
+
+        sys.stdout.write(report_text(d))
+    if args.check:
+        stale = [f for f, text in files.items() if not f.exists() or f.read_text() != text]
+        if stale:
+            names = ", ".join(str(f) for f in stale)
+            print(f"rodctl gains --check: {names} not what the parameters generate; "
+                  f"regenerate with: {regenerate_command(args)}", file=sys.stderr)
+            return 1
+        print(f"up to date: {', '.join(str(f) for f in files)}")
+        return 0
+    if args.json:
+        Path(args.json).write_text(json.dumps(d.to_json(), indent=1) + "\n")
+        print(f"wrote {args.json}")
+    if args.header or not (args.report or args.json):
+        for f, text in files.items():
+            f.parent.mkdir(parents=True, exist_ok=True)
+            f.write_text(text)
+        rho = d.checks["closed_loop_spectral_radius"]
+        print(f"wrote {', '.join(str(f) for f in files)}  (N={d.N}, {1 / d.dt:g} Hz, "
+              f"closed-loop spectral radius {rho:.5f})")
+    return 0
+
+
+def run_params(args) -> int:
+    text = params_from_args(args).to_toml()
+    if args.out:
+        if Path(args.out).exists() and not args.force:
+            raise UserError(f"{args.out} exists; pass --force to overwrite")
+        Path(args.out).write_text(text)
+        print(f"wrote {args.out}")
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+def register(sub) -> None:
+    g = sub.add_parser("gains", help="design the sampled-loop LQR and observer, write the firmware header",
+                       description="Design gains for the sampled loop and generate firmware/include/rod_gains.h. "
+                                   "Exit 2: bad parameters; exit 3: the design would not stabilize the loop.")
+    add_param_args(g)
+    g.add_argument("--header", metavar="PATH", help="write the header here (default firmware/include/rod_gains.h)")
+    g.add_argument("--json", metavar="PATH", help="write the design (A, B, Ad, Bd, C, K, L, ...) as JSON")
+    g.add_argument("--check", action="store_true", help="exit 1 if the header on disk is not what the parameters generate")
+    g.add_argument("--report", action="store_true", help="print poles, margins, critical lengths, the paper's K sampled")
+    g.set_defaults(func=run_gains)
+
+    pp = sub.add_parser("params", help="print or write a complete parameter file (defaults plus --set)")
+    add_param_args(pp)
+    pp.add_argument("--out", metavar="PATH", help="write to PATH instead of stdout")
+    pp.add_argument("--force", action="store_true", help="overwrite --out")
+    pp.set_defaults(func=run_params)

@@ -1,0 +1,44 @@
+"""rodctl sil-lib: build the firmware core as a host shared library for given parameters."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+from rodgains.errors import UserError
+
+from rodctl.cli.gains import add_param_args, params_from_args, regenerate_command
+
+
+def run_sil_lib(args) -> int:
+    from rodctl.build.sil_build import build_sil
+
+    params = params_from_args(args)
+    args.header = None  # the regenerate line names the parameters, not a header path
+    lib = build_sil(params, command=regenerate_command(args))
+    if args.output:
+        out = Path(args.output)
+        if out.is_dir() or args.output.endswith(("/", "\\")):
+            out = out / lib.name
+        try:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(lib, out)
+        except OSError as e:
+            raise UserError(f"cannot write {out}: {e.strerror}") from None
+        lib = out
+    print(f"SIL library for N={params.N} at {1.0 / params.dt:g} Hz (parameters {params.sha256()[:16]})")
+    print(lib)
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "sil-lib",
+        help="build the firmware core as a host shared library (SIL) for these parameters",
+        description="Generate rod_gains.h for the parameters into build/sil/ (the committed header is not "
+                    "touched), compile firmware/src/core + firmware/sil into a shared library with the stable "
+                    "rod_sil_* ABI (firmware/sil/rod_sil.h), and print its path as the last line.",
+    )
+    add_param_args(p)
+    p.add_argument("-o", "--output", metavar="PATH", help="also copy the library to PATH (a file or a folder)")
+    p.set_defaults(func=run_sil_lib)

@@ -1,0 +1,226 @@
+"""rodctl sim: run a scenario on the simulated rod (the default main job, no hardware needed)."""
+
+from __future__ import annotations
+
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rodgains.errors import UserError
+
+from rodctl.cli.gains import add_param_args, params_from_args
+
+TABLE_BEGIN = "<!-- BEGIN scenario table: regenerate with `rodctl sim --all --readme README.md` -->"
+TABLE_END = "<!-- END scenario table -->"
+
+
+class Progress:
+    """One status line on stderr: rewritten in place on a terminal, a line per quarter otherwise."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self.tty = sys.stderr.isatty()
+        self.last = -1
+        self.t0 = time.monotonic()
+
+    def __call__(self, label: str, fraction: float) -> None:
+        pct = int(100 * fraction)
+        if self.tty:
+            bar = "#" * (pct // 5)
+            sys.stderr.write(f"\r  {self.name} [{label}] [{bar:<20}] {pct:3d}%")
+            sys.stderr.flush()
+        elif pct // 25 != self.last // 25:
+            sys.stderr.write(f"  {self.name} [{label}] {pct}%\n")
+        self.last = pct
+
+    def done(self) -> None:
+        if self.tty:
+            sys.stderr.write("\r" + " " * 70 + "\r")
+            sys.stderr.flush()
+
+
+def write_log(o, trace, path: Path) -> tuple[Path, Path]:
+    """The trace in the device log format (logfile.LogWriter), plus the true state beside it."""
+    from rodctl.logs import logfile
+    from rodctl.link import protocol as P
+
+    p = o.params
+    firmware = trace.est is not None
+    n = trace.est.shape[1] // 2 if firmware else trace.theta.shape[1]
+    meta = logfile.simulator_metadata(p, n=n, source=f"simulator: rodctl sim --scenario {o.name} ({trace.label}"
+                                      + ("" if firmware else "; state feedback, theta_hat is the true state") + ")")
+    period_us = int(round(p.dt * 1e6))
+    w = logfile.LogWriter(path, meta, n=n)
+    try:
+        est = trace.est if firmware else np.hstack([trace.theta, np.zeros_like(trace.theta)])
+        mode = trace.mode if trace.mode is not None else np.full(len(trace.t), 1)
+        duty = trace.duty if trace.duty is not None else np.zeros(len(trace.t))
+        count = trace.count if trace.count is not None else np.zeros(len(trace.t), int)
+        for k in range(len(trace.t)):
+            m = int(mode[k])
+            reason = trace.reason if m == 3 else 0
+            enabled = m in (1, 2)
+            msg = P.Telemetry(m, reason, (1 if enabled else 0) | 4, n, int(count[k]), float(est[k, n]),
+                              float(trace.torque[k]), float(duty[k]), 0, 0, 0, 0,
+                              tuple(est[k, :n].tolist()), tuple(est[k, n:].tolist()))
+            w.write_telemetry(msg, seq=k, time_us=(k * period_us) & 0xFFFFFFFF, host_time_s=float(trace.t[k]))
+    finally:
+        w.close()
+    truth = path.with_name(path.stem + ".truth.csv")
+    N = trace.theta.shape[1]
+    header = "time_s," + ",".join(f"theta_{i + 1}_rad" for i in range(N))
+    np.savetxt(truth, np.column_stack([trace.t, trace.theta]), delimiter=",", header=header, comments="",
+               fmt="%.9g")
+    return path, truth
+
+
+def summary_lines(o) -> list[str]:
+    from rodctl.sim.figures import fmt
+
+    lines = [f"{o.name}: {o.title}", f"  {'PASS' if o.passed else 'FAIL'}: {o.criterion}"]
+    head = f"  {'run':22s} {'settle<1deg [s]':>15s} {'overshoot [deg]':>15s} {'peak |u| [N m]':>14s} " \
+           f"{'swing-up [s]':>12s} {'est. err [deg]':>14s} {'final [deg]':>11s}"
+    lines.append(head)
+    for label, m in o.metrics.items():
+        lines.append(f"  {label:22s} {fmt(m['settle_s']):>15s} {fmt(m['overshoot_deg'], 1):>15s} "
+                     f"{fmt(m['peak_torque_Nm'], 3):>14s} {fmt(m['swingup_s']):>12s} {fmt(m['est_rms_deg']):>14s} "
+                     f"{fmt(m['final_dev_deg']):>11s}")
+    return lines
+
+
+def _outputs(args, name: str, all_mode: bool) -> tuple[Path | None, Path | None]:
+    if all_mode:
+        folder = Path(args.figures)
+        return folder / f"sim-{name}.png", None
+    plot = None if args.no_plot else Path(args.plot or f"sim-{name}.png")
+    log = None if args.no_log else Path(args.log or f"sim-{name}.csv")
+    return plot, log
+
+
+def run_one(args, name: str, params, all_mode: bool = False):
+    from rodctl.sim.scenarios import Options, SCENARIOS
+
+    scen = SCENARIOS[name]
+    prog = Progress(name)
+    t0 = time.monotonic()
+    try:
+        o = scen.run(Options(params, progress=prog, duration=args.duration, plant_kind=args.plant,
+                             plant_edges=args.edges))
+    finally:
+        prog.done()
+    wall = time.monotonic() - t0
+    plot, log = _outputs(args, name, all_mode)
+    written = []
+    if plot is not None:
+        from rodctl.sim.figures import save
+
+        plot.parent.mkdir(parents=True, exist_ok=True)
+        save(o, plot)
+        written.append(str(plot))
+    if log is not None:
+        log.parent.mkdir(parents=True, exist_ok=True)
+        traces = o.traces
+        if len(traces) == 1:
+            written += [str(f) for f in write_log(o, traces[0], log)]
+        else:
+            for tr in traces:
+                tag = re.sub(r"[^A-Za-z0-9.]+", "-", tr.label).strip("-")
+                written += [str(f) for f in write_log(o, tr, log.with_name(f"{log.stem}-{tag}{log.suffix}"))]
+    return o, wall, written
+
+
+def table_markdown(outcomes) -> str:
+    from rodctl.sim.figures import fmt
+    from rodctl.sim.scenarios import SCENARIOS
+
+    rows = ["| scenario | paper | run | settle to 1 deg [s] | overshoot [deg] | peak torque [N m] | swing-up [s] | "
+            "estimate error RMS [deg] | final [deg] | result |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
+    for o in outcomes:
+        s = SCENARIOS[o.name]
+        if o.passed == s.expect_pass:
+            verdict = "pass" if o.passed else "**fail** (documented below)"
+        else:
+            verdict = ("pass" if o.passed else "**fail**") + " (unexpected)"
+        for i, (label, m) in enumerate(o.metrics.items()):
+            rows.append(f"| {o.name if i == 0 else ''} | {s.paper if i == 0 else ''} | {label} | {fmt(m['settle_s'])} | "
+                        f"{fmt(m['overshoot_deg'], 1)} | {fmt(m['peak_torque_Nm'], 3)} | {fmt(m['swingup_s'])} | "
+                        f"{fmt(m['est_rms_deg'])} | {fmt(m['final_dev_deg'])} | {verdict if i == 0 else ''} |")
+    crit = "\n".join(f"- `{o.name}`: {o.criterion}." for o in outcomes)
+    return "\n".join(rows) + "\n\nPass criteria:\n\n" + crit + "\n"
+
+
+def replace_table(readme: Path, table: str) -> None:
+    text = readme.read_text() if readme.exists() else ""
+    block = f"{TABLE_BEGIN}\n{table}{TABLE_END}"
+    if TABLE_BEGIN in text and TABLE_END in text:
+        start = text.index(TABLE_BEGIN)
+        end = text.index(TABLE_END) + len(TABLE_END)
+        text = text[:start] + block + text[end:]
+    else:
+        raise UserError(f"{readme}: no scenario-table markers ({TABLE_BEGIN!r} ... {TABLE_END!r}) to replace")
+    readme.write_text(text)
+
+
+def run_sim(args) -> int:
+    from rodctl.sim.scenarios import DEFAULT, SCENARIOS
+
+    if args.list:
+        for name, s in SCENARIOS.items():
+            mark = " (default)" if name == DEFAULT else ""
+            print(f"{name:15s} {s.paper:7s} {s.title}{mark}")
+        return 0
+    if args.plant is not None and args.plant not in ("inextensible", "der"):
+        raise UserError(f"--plant {args.plant}: inextensible or der")
+    if args.edges is not None and not 2 <= args.edges <= 64:
+        raise UserError(f"--edges {args.edges}: must be between 2 and 64")
+    if args.duration is not None and not 0 < args.duration <= 600:
+        raise UserError(f"--duration {args.duration}: must be in (0, 600] s")
+    params = params_from_args(args)
+    names = list(SCENARIOS) if args.all else [args.scenario or DEFAULT]
+    for name in names:
+        if name not in SCENARIOS:
+            raise UserError(f"unknown scenario {name!r}; one of: {', '.join(SCENARIOS)} (rodctl sim --list)")
+    outcomes, unexpected = [], []
+    for name in names:
+        o, wall, written = run_one(args, name, params, all_mode=args.all)
+        outcomes.append(o)
+        sim_seconds = sum(tr.t[-1] + (tr.t[1] - tr.t[0]) for tr in o.traces)
+        for line in summary_lines(o):
+            print(line)
+        print(f"  simulated {sim_seconds:.1f} s in {wall:.2f} s" + (f"; wrote {', '.join(written)}" if written else ""))
+        if o.passed != SCENARIOS[name].expect_pass:
+            unexpected.append(name)
+    if args.all and args.readme:
+        replace_table(Path(args.readme), table_markdown(outcomes))
+        print(f"updated the scenario table in {args.readme}")
+    if unexpected:
+        print(f"rodctl sim: {', '.join(unexpected)} did not meet the expected outcome", file=sys.stderr)
+        return 1
+    return 0
+
+
+def register(sub) -> None:
+    s = sub.add_parser(
+        "sim", help="simulate the rod with the firmware in the loop (default: swing-up and balance)",
+        description="Run a scenario: the firmware's own C (SIL library built for the parameters) against the "
+                    "simulated rod, motor, driver and encoder; or the paper's state-feedback figures. Writes a PNG "
+                    "and a log in the device log format (rodctl plot reads it), and prints the metrics. Exit 1 "
+                    "when a scenario does not meet its expected outcome.")
+    add_param_args(s)
+    s.add_argument("--scenario", metavar="NAME", help="scenario to run (default: swingup); see --list")
+    s.add_argument("--list", action="store_true", help="list the scenarios and exit")
+    s.add_argument("--plot", metavar="PNG", help="figure to write (default: sim-NAME.png)")
+    s.add_argument("--log", metavar="PATH", help="log to write, device log format (default: sim-NAME.csv)")
+    s.add_argument("--no-plot", action="store_true", help="do not write the figure")
+    s.add_argument("--no-log", action="store_true", help="do not write the log")
+    s.add_argument("--plant", metavar="KIND", help="plant for the testbed scenarios: inextensible (default) or der")
+    s.add_argument("--edges", type=int, metavar="N", help="plant edges for the testbed scenarios (default: rod.edges)")
+    s.add_argument("--duration", type=float, metavar="S", help="simulated time [s] (default: the scenario's)")
+    s.add_argument("--all", action="store_true", help="run every scenario (figures into --figures, no logs)")
+    s.add_argument("--figures", metavar="DIR", default="docs/img", help="with --all: where figures go (docs/img)")
+    s.add_argument("--readme", metavar="PATH", help="with --all: replace the scenario table in this README")
+    s.set_defaults(func=run_sim)

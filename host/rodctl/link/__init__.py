@@ -1,0 +1,1 @@
+"""The link to a board: protocol codec and spec, ports, the session (heartbeat, reader), and sim://."""

@@ -1,0 +1,621 @@
+"""A session with the board (or the virtual one): the port, a reader thread, heartbeats, commands.
+
+    from rodctl.link.session import Session
+    with Session("sim://") as s:              # opens, waits for the HELLO
+        print(s.hello.fw_major, s.hello.n)
+        s.arm(P.ArmMode.SWING_UP)              # waits for the ACK; UserError on refusal
+        tlm = s.wait_telemetry()               # the next telemetry frame
+    # leaving: DISARM sent (when the port still works), threads stopped, port closed
+
+While open, a HEARTBEAT goes out every 100 ms (faster when the device's heartbeat timeout is
+short), so a host that dies or hangs leaves an armed device disarming itself after its
+heartbeat timeout (0.5 s by default) with FAULT reason HEARTBEAT.
+
+Frames reach listeners (add_listener) in the reader thread, in arrival order, each with the host
+receive time [s since the session opened]. The session's stream starts at the device's ACK of a
+HELLO_REQUEST sent once the link has drained (see _handshake): frames that sat in the USB buffer
+from before we connected are skipped (stale_frames), so sequence gaps count only frames lost while
+connected. A listener added after
+open gets every frame of the session first (replayed), so a log started right after open misses
+nothing.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import itertools
+import math
+import os
+import re
+import threading
+import time
+from typing import Callable
+
+from rodgains.errors import UserError
+
+from rodctl import paths
+from rodctl.link import protocol as P
+from rodctl.link.ports import find_port
+
+HEARTBEAT_INTERVAL_S = 0.1
+ACK_TIMEOUT_S = 1.0
+HELLO_TIMEOUT_S = 3.0
+REPLAY_FRAMES = 20000  # frames kept for listeners added after open (20 s at 1 kHz)
+
+REASON_TEXT = {
+    P.Reason.NONE: "no reason",
+    P.Reason.HOST: "disarmed by the host",
+    P.Reason.ANGLE_LIMIT: "angle limit",
+    P.Reason.SPEED_LIMIT: "speed limit",
+    P.Reason.DRIVER_FAULT: "motor driver fault",
+    P.Reason.HEARTBEAT: "heartbeat lost",
+    P.Reason.NON_FINITE: "non-finite estimate",
+    P.Reason.OVERRUN: "control step overrun",
+}
+
+ARMED_MODES = (P.Mode.BALANCE, P.Mode.SWING_UP, P.Mode.CATCH)
+
+
+def name_of(enum_cls, value) -> str:
+    try:
+        return enum_cls(int(value)).name
+    except ValueError:
+        return f"{int(value)}?"
+
+
+def reason_text(reason) -> str:
+    try:
+        return REASON_TEXT[P.Reason(int(reason))]
+    except ValueError:
+        return f"reason {int(reason)}"
+
+
+# ---- run-time settings (SET) -------------------------------------------------------------------
+
+def _config_constants() -> dict[str, float]:
+    """Bounds the firmware checks a SET against, read from firmware/src/core/rod_config.h."""
+    out = {"ROD_DECIMATION_MIN": 1.0, "ROD_DECIMATION_MAX": 1000.0, "ROD_HEARTBEAT_TIMEOUT_MIN_S": 0.05,
+           "ROD_HEARTBEAT_TIMEOUT_MAX_S": 10.0}
+    try:
+        text = (paths.CORE_SRC / "rod_config.h").read_text()
+    except OSError:
+        return out
+    for name in out:
+        m = re.search(rf"#define\s+{name}\s+([0-9.eE+-]+)f?\b", text)
+        if m:
+            out[name] = float(m.group(1).rstrip("f"))
+    return out
+
+
+class Setting:
+    """One `rodctl set NAME=VALUE` name: its device parameter and the unit conversion."""
+
+    def __init__(self, name: str, param, unit: str, hello_field: str, scale: float = 1.0, integer: bool = False):
+        self.name, self.param, self.unit, self.hello_field = name, param, unit, hello_field
+        self.scale = scale  # device value = user value * scale
+        self.integer = integer
+
+    def parse(self, text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise UserError(f"{self.name}: {text!r} is not a number") from None
+        if not math.isfinite(v):
+            raise UserError(f"{self.name}: {text!r} is not a finite number")
+        return v
+
+    def to_device(self, v: float) -> float:
+        return v * self.scale
+
+    def from_device(self, v: float) -> float:
+        return v / self.scale
+
+    def format(self, v: float) -> str:
+        if self.integer:
+            return f"{v:g}"
+        return f"{v:.6g} {self.unit}".strip()
+
+    def allowed(self, hello=None, design_params=None) -> str:
+        """The range the firmware accepts, in this setting's unit."""
+        c = _config_constants()
+        n = self.name
+        if n == "swing_amplitude":
+            tmax = f"{hello.torque_max:.6g}" if hello is not None else "torque_max"
+            return f"0 <= {n} <= {tmax} N m (the firmware's torque ceiling)"
+        if n == "swing_angle_deg":
+            return f"0 < {n} <= 180 deg"
+        if n == "catch_angle_deg":
+            if design_params is not None:
+                lim = min(design_params["safety"]["angle_limit_deg"], 90.0)
+                return f"0 < {n} < {lim:g} deg (the balance angle limit, at most 90 deg)"
+            return f"0 < {n} < min(balance angle limit, 90) deg"
+        if n == "telemetry_decimation":
+            return f"integer {c['ROD_DECIMATION_MIN']:g} <= {n} <= {c['ROD_DECIMATION_MAX']:g}"
+        if n == "heartbeat_timeout":
+            return f"{c['ROD_HEARTBEAT_TIMEOUT_MIN_S']:g} <= {n} <= {c['ROD_HEARTBEAT_TIMEOUT_MAX_S']:g} s"
+        return "see docs/protocol.md"
+
+
+_DEG = math.pi / 180.0
+SETTINGS = {s.name: s for s in (
+    Setting("swing_amplitude", P.Param.SWING_AMPLITUDE, "N m", "swing_amplitude"),
+    Setting("swing_angle_deg", P.Param.SWING_ANGLE, "deg", "swing_angle", scale=_DEG),
+    Setting("catch_angle_deg", P.Param.CATCH_ANGLE, "deg", "catch_angle", scale=_DEG),
+    Setting("telemetry_decimation", P.Param.TELEMETRY_DECIMATION, "", "decimation", integer=True),
+    Setting("heartbeat_timeout", P.Param.HEARTBEAT_TIMEOUT, "s", "heartbeat_timeout"),
+)}
+
+
+def parse_assignment(text: str) -> tuple[Setting, float]:
+    """'NAME=VALUE' -> (Setting, value in the user's unit); UserError on a bad name or number."""
+    if "=" not in text:
+        raise UserError(f"expected NAME=VALUE, got {text!r} (names: {', '.join(SETTINGS)})")
+    name, value = (x.strip() for x in text.split("=", 1))
+    s = SETTINGS.get(name)
+    if s is None:
+        raise UserError(f"unknown setting {name!r}: choose one of {', '.join(SETTINGS)}")
+    return s, s.parse(value)
+
+
+def hello_settings(hello) -> dict[str, float]:
+    """The settings of a HELLO in the user's units (the names of `rodctl set`)."""
+    return {s.name: s.from_device(getattr(hello, s.hello_field)) for s in SETTINGS.values()}
+
+
+# ---- opening ports -------------------------------------------------------------------------------
+
+def open_serial(port: str, timeout: float = 0.05):
+    """pyserial port for a device path, any pyserial URL or sim://; UserError when it cannot open."""
+    import serial
+
+    from rodctl.link.urlhandler import register
+
+    register()
+    is_url = "://" in port
+    try:
+        if is_url:
+            return serial.serial_for_url(port, baudrate=115200, timeout=timeout, write_timeout=2.0)
+        return serial.Serial(port, baudrate=115200, timeout=timeout, write_timeout=2.0, exclusive=True)
+    except serial.SerialException as e:
+        msg = str(e).strip()
+        if "exclusively lock" in msg or "Resource temporarily unavailable" in msg:
+            raise UserError(f"{port} is in use by another program (another rodctl?)") from None
+        if isinstance(e.__cause__ or e.__context__, FileNotFoundError) or "No such file" in msg:
+            raise UserError(f"cannot open {port}: no such port (is the board plugged in? "
+                            "`--port sim://` runs the simulated rod)") from None
+        raise UserError(f"cannot open {port}: {msg}") from None
+    except (ValueError, OSError) as e:
+        raise UserError(f"cannot open {port}: {e}") from None
+
+
+class Session:
+    """An open connection to the firmware (see the module doc)."""
+
+    def __init__(self, port: str | None = None, *, hello_timeout: float = HELLO_TIMEOUT_S,
+                 heartbeat_interval: float = HEARTBEAT_INTERVAL_S, disarm_on_close: bool = True):
+        self.port = find_port(port)
+        self.hello_timeout = hello_timeout
+        self.heartbeat_interval = heartbeat_interval
+        self.disarm_on_close = disarm_on_close
+        self.ser = None
+        self.decoder = P.Decoder()
+        self.hello = None  # latest HELLO message
+        self.hello_seen = 0  # HELLO frames received
+        self.telemetry = None  # latest TELEMETRY message
+        self.telemetry_frame = None
+        self.telemetry_seen = 0
+        self.dropped_at_connect = None  # the device's frames_dropped in the first telemetry
+        self.frames = 0  # valid frames received (= frames dispatched to listeners)
+        self.sync_bytes = 0  # bytes dropped before the first frame boundary
+        self.disconnected: str | None = None  # why the link ended, when it did
+        self.listener_error: Exception | None = None  # first exception a listener raised
+        self.t0 = time.perf_counter()
+        self.open_unix = time.time()
+        self._seq = itertools.count(1)
+        self._write_lock = threading.Lock()
+        self._lock = threading.RLock()  # frame dispatch and listener changes
+        self._cond = threading.Condition(self._lock)
+        self._pending: dict[int, list] = {}  # host seq -> [Event, Ack]
+        self._listeners: list[Callable] = []
+        self._recent: collections.deque = collections.deque(maxlen=REPLAY_FRAMES)
+        self._stop = threading.Event()
+        self._hb_paused = 0
+        self._reader = None
+        self._heart = None
+        self._synced = False
+        self._sync_buf = b""
+        self._started = False  # frames count from the ACK of our first HELLO_REQUEST on
+        self._start_seqs: set[int] = set()
+        self._probe_seqs: set[int] = set()
+        self._probe_acked = False
+        self._last_seq: int | None = None
+        self.stale_frames = 0  # frames that were queued before we connected (skipped)
+        self.seq_gaps = 0  # device frames missing since the session started
+        self.seq_restarts = 0
+        self._err_base = (0, 0)
+        self.closed = False
+        self.disarm_acked = False  # close() sent DISARM and the device acknowledged it
+
+    # --- life cycle -------------------------------------------------------------------------
+    def open(self) -> "Session":
+        self.ser = open_serial(self.port)
+        try:
+            self.ser.reset_input_buffer()
+        except Exception:  # noqa: BLE001 - not every URL handler supports it
+            pass
+        self.t0 = time.perf_counter()
+        self.open_unix = time.time()
+        self._reader = threading.Thread(target=self._read_loop, name="rodctl-reader", daemon=True)
+        self._reader.start()
+        self._heart = threading.Thread(target=self._heartbeat_loop, name="rodctl-heartbeat", daemon=True)
+        self._heart.start()
+        try:
+            self._handshake(self.hello_timeout)
+        except BaseException:
+            self.close(disarm=False)
+            raise
+        return self
+
+    def _handshake(self, timeout: float) -> None:
+        """Two HELLO_REQUESTs: the first one's ACK ends what was queued before we connected (a USB
+        buffer that filled while no host read it, and the frames the device dropped while it drained);
+        the second one's ACK is where this session's frames begin, from a drained link.
+
+        Frames before it are skipped (stale_frames), so the stream seen by listeners and the gap
+        count start clean.
+        """
+        deadline = time.monotonic() + timeout
+        for phase, seqs in (("probe", self._probe_seqs), ("start", self._start_seqs)):
+            while True:
+                seq = next(self._seq) & 0xFFFFFFFF
+                with self._lock:
+                    seqs.add(seq)
+                self._send(P.HelloRequest(), seq)
+                with self._cond:
+                    end = min(deadline, time.monotonic() + 0.5)
+                    done = (lambda: self._probe_acked) if phase == "probe" else (
+                        lambda: self._started and self.hello_seen > 0)
+                    while not done():
+                        self.check()
+                        left = end - time.monotonic()
+                        if left <= 0:
+                            break
+                        self._cond.wait(min(left, 0.05))
+                    if done():
+                        break
+                if time.monotonic() >= deadline:
+                    if self.decoder.frames == 0:
+                        raise UserError(f"{self.port}: no rodlink frames within {timeout:g} s: is the board "
+                                        "running the rod firmware (flash it with `rodctl flash`)?")
+                    raise UserError(f"{self.port}: the device does not answer HELLO_REQUEST "
+                                    f"(rodctl speaks rodlink v{P.VERSION})")
+
+    def __enter__(self) -> "Session":
+        if self.ser is None:
+            self.open()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self, disarm: bool | None = None) -> None:
+        """DISARM (when the port still works), stop the threads, close the port. Idempotent."""
+        if self.closed:
+            return
+        self.closed = True
+        if disarm is None:
+            disarm = self.disarm_on_close
+        self._hb_paused += 1  # the DISARM (any command) is the last sign of life
+        try:
+            if disarm and self.ser is not None and self.disconnected is None:
+                try:
+                    self.command(P.Disarm(), timeout=0.5, what="disarm")
+                    self.disarm_acked = True
+                except (UserError, OSError):
+                    pass
+        finally:
+            self._stop.set()
+            if self.ser is not None:
+                try:
+                    self.ser.cancel_read()
+                except Exception:  # noqa: BLE001
+                    pass
+            for t in (self._heart, self._reader):
+                if t is not None and t is not threading.current_thread():
+                    t.join(timeout=2)
+            if self.ser is not None:
+                try:
+                    self.ser.close()
+                except Exception:  # noqa: BLE001
+                    pass
+
+    @property
+    def alive(self) -> bool:
+        return not self.closed and self.disconnected is None
+
+    def check(self) -> None:
+        """Raise UserError when the link has ended (unplugged board, stopped virtual device)."""
+        if self.disconnected is not None:
+            raise UserError(f"{self.port}: device disconnected ({self.disconnected})")
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.t0
+
+    # --- listeners --------------------------------------------------------------------------
+    def add_listener(self, fn: Callable, replay: bool = True) -> None:
+        """fn(frame, host_time_s) for every frame, in the reader thread; replay: frames so far first."""
+        with self._lock:
+            if replay:
+                for frame, t in list(self._recent):
+                    fn(frame, t)
+            self._listeners.append(fn)
+
+    def remove_listener(self, fn: Callable) -> None:
+        with self._lock:
+            if fn in self._listeners:
+                self._listeners.remove(fn)
+
+    # --- threads ----------------------------------------------------------------------------
+    def _sync(self, data: bytes) -> bytes:
+        """Drop bytes before the first frame boundary (a port opened mid-frame), keep a whole frame."""
+        buf = self._sync_buf + data
+        i = buf.find(b"\0")
+        if i < 0:
+            self._sync_buf = buf[-P.MAX_FRAME:]
+            return b""
+        self._synced = True
+        self._sync_buf = b""
+        head = buf[:i + 1]
+        try:
+            P.decode_frame(head)
+            return buf
+        except P.ProtocolError:
+            self.sync_bytes += len(head)
+            return buf[i + 1:]
+
+    def _read_loop(self) -> None:
+        import serial
+
+        ser = self.ser
+        feed = self.decoder.feed
+        while not self._stop.is_set():
+            try:
+                n = ser.in_waiting
+                data = ser.read(n if n > 0 else 1)
+            except (serial.SerialException, OSError, TypeError, AttributeError) as e:
+                if not self._stop.is_set():
+                    self._lost(str(e) or type(e).__name__)
+                return
+            if not data:
+                continue
+            t = time.perf_counter() - self.t0
+            if not self._synced:
+                data = self._sync(data)
+                if not data:
+                    continue
+            frames = feed(data)
+            if frames:
+                self._dispatch(frames, t)
+
+    def _dispatch(self, frames, t: float) -> None:
+        with self._cond:
+            for f in frames:
+                ft = f.type
+                if not self._started:
+                    if ft == P.MsgType.ACK and f.msg.command_seq in self._start_seqs:
+                        self._started = True
+                        self._err_base = (self.decoder.crc_errors, self.decoder.errors)
+                    else:
+                        if ft == P.MsgType.ACK and f.msg.command_seq in self._probe_seqs:
+                            self._probe_acked = True
+                        self.stale_frames += 1
+                        continue
+                last = self._last_seq
+                if last is not None:
+                    gap = (f.seq - last - 1) & 0xFFFFFFFF
+                    if gap < 0x80000000:
+                        self.seq_gaps += gap
+                    else:
+                        self.seq_restarts += 1
+                self._last_seq = f.seq
+                if ft == P.MsgType.TELEMETRY:
+                    self.telemetry = f.msg
+                    self.telemetry_frame = f
+                    self.telemetry_seen += 1
+                    if self.dropped_at_connect is None:
+                        self.dropped_at_connect = f.msg.frames_dropped
+                elif ft == P.MsgType.ACK:
+                    waiter = self._pending.get(f.msg.command_seq)
+                    if waiter is not None:
+                        waiter[1] = f.msg
+                        waiter[0].set()
+                elif ft == P.MsgType.HELLO:
+                    self.hello = f.msg
+                    self.hello_seen += 1
+                self.frames += 1
+                self._recent.append((f, t))
+                for fn in self._listeners:
+                    try:
+                        fn(f, t)
+                    except Exception as e:  # noqa: BLE001 - e.g. disk full: the main thread reports it
+                        if self.listener_error is None:
+                            self.listener_error = e
+            self._cond.notify_all()
+
+    def _lost(self, why: str) -> None:
+        with self._cond:
+            self.disconnected = why
+            for waiter in self._pending.values():
+                waiter[0].set()
+            self._cond.notify_all()
+
+    def _interval(self) -> float:
+        iv = self.heartbeat_interval
+        h = self.hello
+        if h is not None and h.heartbeat_timeout > 0:
+            iv = min(iv, max(0.01, h.heartbeat_timeout / 4))
+        return iv
+
+    def _heartbeat_loop(self) -> None:
+        while not self._stop.wait(self._interval()):
+            if self._hb_paused or self.disconnected is not None:
+                continue
+            try:
+                self._send(P.Heartbeat())
+            except UserError:
+                return
+
+    @contextlib.contextmanager
+    def heartbeat_paused(self):
+        """Send no heartbeat inside the block (the host falls silent, as a hung host would)."""
+        self._hb_paused += 1
+        try:
+            yield
+        finally:
+            self._hb_paused -= 1
+
+    # --- sending ----------------------------------------------------------------------------
+    def _send(self, msg, seq: int | None = None) -> int:
+        import serial
+
+        self.check()
+        if seq is None:
+            seq = next(self._seq) & 0xFFFFFFFF
+        wire = P.encode(msg, seq, int(time.monotonic() * 1e6) & 0xFFFFFFFF)
+        try:
+            with self._write_lock:
+                self.ser.write(wire)
+        except (serial.SerialException, OSError) as e:
+            self._lost(str(e) or type(e).__name__)
+            self.check()
+        return seq
+
+    def command(self, msg, timeout: float = ACK_TIMEOUT_S, what: str | None = None):
+        """Send one command and wait for its ACK; returns the Ack, raises UserError on refusal."""
+        what = what or P.MsgType(msg.TYPE).name.lower()
+        for attempt in range(4):
+            ev = threading.Event()
+            waiter = [ev, None]
+            with self._lock:
+                self._pending[seq := next(self._seq) & 0xFFFFFFFF] = waiter
+            try:
+                self._send(msg, seq)
+                ok = ev.wait(timeout)
+                self.check()
+                if not ok:
+                    raise UserError(f"{self.port}: no answer to {what} within {timeout:g} s "
+                                    "(is the board running the rod firmware?)")
+            finally:
+                with self._lock:
+                    self._pending.pop(seq, None)
+            ack = waiter[1]
+            if ack.result == P.AckResult.BUSY and attempt < 3:
+                time.sleep(0.01)
+                continue
+            if ack.result != P.AckResult.OK:
+                raise UserError(self._refusal(msg, ack, what))
+            return ack
+        raise AssertionError("unreachable")
+
+    def _refusal(self, msg, ack, what: str) -> str:
+        result = name_of(P.AckResult, ack.result)
+        if ack.result == P.AckResult.BAD_STATE:
+            if ack.mode == P.Mode.FAULT:
+                return f"device is in FAULT ({reason_text(self.current_reason())}): run `rodctl clear-fault`"
+            return f"device refused {what} in mode {name_of(P.Mode, ack.mode)}"
+        if ack.result == P.AckResult.BAD_VALUE:
+            return f"device refused {what}: value out of range"
+        if ack.result == P.AckResult.BUSY:
+            return f"device refused {what}: busy (command queue full), try again"
+        return (f"device refused {what} ({result}): the firmware and this rodctl speak different "
+                f"protocol versions? (rodctl protocol v{P.VERSION})")
+
+    def current_reason(self):
+        """The device's reason code from its latest telemetry or hello."""
+        latest = self.telemetry if self.telemetry is not None else self.hello
+        if latest is not None and latest.mode == P.Mode.FAULT:
+            return latest.reason
+        try:
+            return self.request_hello(timeout=0.5).reason
+        except UserError:
+            return latest.reason if latest is not None else P.Reason.NONE
+
+    # --- commands ---------------------------------------------------------------------------
+    def request_hello(self, timeout: float = 1.0):
+        """Ask for a HELLO and return it (the first one received after the request)."""
+        with self._cond:
+            before = self.hello_seen
+        deadline = time.monotonic() + timeout
+        self._send(P.HelloRequest())
+        with self._cond:
+            while self.hello_seen == before:
+                left = deadline - time.monotonic()
+                self.check()
+                if left <= 0:
+                    if self.decoder.frames == 0:
+                        raise UserError(f"{self.port}: no rodlink frames within {timeout:g} s: is the board "
+                                        "running the rod firmware (flash it with `rodctl flash`)?")
+                    raise UserError(f"{self.port}: no HELLO within {timeout:g} s")
+                self._cond.wait(min(left, 0.1))
+            return self.hello
+
+    def wait_telemetry(self, timeout: float = 1.0, newer_than: int | None = None):
+        """The next telemetry message (after `newer_than` telemetry frames seen, default: now)."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            start = self.telemetry_seen if newer_than is None else newer_than
+            while self.telemetry_seen <= start:
+                self.check()
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise UserError(f"{self.port}: no telemetry within {timeout:g} s")
+                self._cond.wait(min(left, 0.1))
+            return self.telemetry
+
+    def arm(self, mode) -> object:
+        mode = P.ArmMode(mode)
+        return self.command(P.Arm(mode), what=f"arm {mode.name.lower().replace('_', '-')}")
+
+    def disarm(self):
+        return self.command(P.Disarm(), what="disarm")
+
+    def clear_fault(self):
+        return self.command(P.ClearFault(), what="clear-fault")
+
+    def set(self, setting: Setting | str, value: float, design_params=None):
+        """Set one run-time setting (value in the setting's user unit); returns the ack."""
+        if isinstance(setting, str):
+            setting = SETTINGS[setting]
+        try:
+            return self.command(P.Set(setting.param, setting.to_device(value)),
+                                what=f"{setting.name}={value:g}")
+        except UserError as e:
+            if "out of range" in str(e):
+                raise UserError(f"device refused {setting.name}={value:g}: allowed "
+                                f"{setting.allowed(self.hello, design_params)}") from None
+            raise
+
+    # --- status -----------------------------------------------------------------------------
+    def counters(self) -> dict[str, int]:
+        d = self.decoder
+        t = self.telemetry
+        return {
+            "frames": self.frames,
+            "crc_errors": d.crc_errors - self._err_base[0],
+            "errors": d.errors - self._err_base[1],
+            "seq_gaps": self.seq_gaps,
+            "seq_restarts": self.seq_restarts,
+            # frames the device dropped while this session was connected (and since its boot)
+            "device_dropped": int(t.frames_dropped - self.dropped_at_connect) if t is not None else 0,
+            "device_dropped_boot": int(t.frames_dropped) if t is not None else 0,
+            "device_rx_errors": int(t.rx_errors) if t is not None else 0,
+            "overruns": int(t.overruns) if t is not None else 0,
+        }
+
+
+def is_tty(stream) -> bool:
+    try:
+        return stream.isatty() and os.environ.get("TERM") != "dumb"
+    except (AttributeError, ValueError):
+        return False

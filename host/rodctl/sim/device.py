@@ -1,0 +1,260 @@
+"""The virtual board: the firmware's host build (rod_dev_*) against the simulated rod, in real time.
+
+    dev = VirtualDevice.from_options(plant="inextensible", edges=None, params=None)
+    runner = RealTimeRunner(dev, take_input=..., deliver=..., can_deliver=...)
+    runner.start(); ...; runner.stop()
+
+One virtual step (period P, from the firmware's own rod_sil_period()):
+    count = plant.encoder()
+    rod_dev_step(count, now_us = k * P_us, last_step_us = 0, driver_fault = 0)
+    plant.advance(duty if rod_dev_enable() else 0, P)       # duty held for one period
+    device bytes <- rod_dev_read()                           # what the board's USB would send
+Host bytes go in through rod_dev_write before a step (the board's main loop takes them between
+timer interrupts). The device's clock is virtual (exactly one period per step), so jitter of the
+host scheduler never shows as an overrun; the runner keeps that clock on the wall clock's pace
+(time.perf_counter) by running the steps that are due in small batches and sleeping between
+batches, never per step, catching up when it was late.
+
+The SIL library holds one device per loaded copy (rod_sil.h), so every VirtualDevice loads a
+private copy of it: two sim:// ports in one process are two independent boards. Copies are
+pooled and reused after close.
+
+Flow control is the USB's: while the host side does not take the bytes (its buffer above
+`backlog`), the runner stops reading the device, whose TX buffer then fills and drops frames,
+counted in telemetry.frames_dropped, exactly like the board when nobody reads its serial port.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import os
+import shutil
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Callable
+
+PLANT_KINDS = ("inextensible", "der")
+
+_POOL_LOCK = threading.Lock()
+_POOL: dict[str, list[ctypes.CDLL]] = {}
+
+
+def _prototype(lib: ctypes.CDLL) -> ctypes.CDLL:
+    f, i, u32, i32, sz = ctypes.c_float, ctypes.c_int, ctypes.c_uint32, ctypes.c_int32, ctypes.c_size_t
+    protos = {
+        "rod_sil_period": (f, []),
+        "rod_sil_edges": (i, []),
+        "rod_dev_reset": (None, [sz]),
+        "rod_dev_step": (f, [i32, u32, u32, i]),
+        "rod_dev_duty": (f, []),
+        "rod_dev_enable": (i, []),
+        "rod_dev_reason": (i, []),
+        "rod_dev_status": (i, [ctypes.POINTER(ctypes.c_float), i]),
+        "rod_dev_write": (sz, [ctypes.c_char_p, sz]),
+        "rod_dev_read": (sz, [ctypes.c_void_p, sz]),
+    }
+    for name, (res, args) in protos.items():
+        fn = getattr(lib, name)
+        fn.restype = res
+        fn.argtypes = args
+    return lib
+
+
+def _take_library(path: Path) -> ctypes.CDLL:
+    """A private copy of the SIL library (its own rod_dev device), from the pool when one is free."""
+    key = str(path)
+    with _POOL_LOCK:
+        free = _POOL.get(key)
+        if free:
+            return free.pop()
+    tmp = tempfile.mkdtemp(prefix="rodsim-")
+    try:
+        copy = os.path.join(tmp, path.name)
+        shutil.copyfile(path, copy)
+        lib = ctypes.CDLL(copy)  # another file: the dynamic loader maps a separate instance
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    lib._rod_key = key
+    return _prototype(lib)
+
+
+def _give_back(lib: ctypes.CDLL) -> None:
+    with _POOL_LOCK:
+        _POOL.setdefault(lib._rod_key, []).append(lib)
+
+
+class VirtualDevice:
+    """One virtual board: firmware (rod_dev_*) + Plant in duty mode, stepped explicitly.
+
+    Not thread-safe: one thread (the runner) makes every call.
+    """
+
+    def __init__(self, params=None, *, plant: str = "inextensible", edges: int | None = None,
+                 params_path: str | None = None, tx_capacity: int = 0):
+        from rodgains.params import load_params
+
+        from rodctl.build.sil_build import build_sil
+        from rodctl.sim.plant import Plant
+
+        if plant not in PLANT_KINDS:
+            from rodgains.errors import UserError
+
+            raise UserError(f"unknown plant {plant!r}: choose one of {', '.join(PLANT_KINDS)}")
+        self.params = params if params is not None else load_params(params_path)
+        self.params_path = params_path
+        self.lib_path = build_sil(self.params)
+        self.plant = Plant(self.params, kind=plant, edges=edges or self.params.N, input_mode="duty")
+        self.kind = plant
+        self.lib = _take_library(self.lib_path)
+        self.period = float(self.lib.rod_sil_period())
+        self.period_us = int(round(self.period * 1e6))
+        self.edges = int(self.lib.rod_sil_edges())
+        self._buf = ctypes.create_string_buffer(65536)
+        self._buf_addr = ctypes.addressof(self._buf)
+        self.lib.rod_dev_reset(tx_capacity)
+        self.steps = 0
+        self._closed = False
+
+    @classmethod
+    def from_options(cls, *, plant: str | None = None, edges: int | str | None = None,
+                     params: str | None = None) -> "VirtualDevice":
+        from rodgains.errors import UserError
+
+        if edges is not None:
+            try:
+                edges = int(edges)
+            except ValueError:
+                raise UserError(f"edges must be an integer, got {edges!r}") from None
+            if not 2 <= edges <= 64:
+                raise UserError(f"edges must be 2..64, got {edges}")
+        return cls(plant=plant or "inextensible", edges=edges, params_path=params)
+
+    # --- one thread drives all of these ----------------------------------------------------
+    @property
+    def time(self) -> float:
+        """Device time [s] (steps done x period)."""
+        return self.steps * self.period
+
+    def write(self, data: bytes) -> int:
+        """Host bytes into the board's RX buffer; returns how many it took (the rest: offer later)."""
+        return self.lib.rod_dev_write(data, len(data))
+
+    def step(self) -> None:
+        lib, plant = self.lib, self.plant
+        count = plant.encoder()
+        lib.rod_dev_step(count, (self.steps * self.period_us) & 0xFFFFFFFF, 0, 0)
+        duty = lib.rod_dev_duty() if lib.rod_dev_enable() else 0.0
+        if not math.isfinite(duty):
+            duty = 0.0
+        plant.advance(duty, self.period)
+        self.steps += 1
+
+    def read(self) -> bytes:
+        """Device bytes the board's USB would send now (whole frames)."""
+        n = self.lib.rod_dev_read(self._buf_addr, len(self._buf))
+        return ctypes.string_at(self._buf_addr, n) if n else b""
+
+    @property
+    def mode(self) -> int:
+        return self.lib.rod_dev_status(None, 0)
+
+    @property
+    def reason(self) -> int:
+        return self.lib.rod_dev_reason()
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            _give_back(self.lib)
+
+    def describe(self) -> str:
+        return (f"firmware N={self.edges} at {1 / self.period:g} Hz (parameters {self.params.sha256()[:16]}), "
+                f"plant {self.kind} with {self.plant.N} edges, duty input, hanging at rest")
+
+
+class RealTimeRunner:
+    """Runs a VirtualDevice on the wall clock in a thread.
+
+    take_input() -> bytes: host bytes that arrived (called once per batch).
+    deliver(bytes): device bytes for the host (called once per batch with what the steps made).
+    backlog() -> int: bytes the host side has not taken yet; above `max_backlog` the device is
+    not read (its TX buffer fills and it drops frames, as on the board).
+    on_batch(): optional hook after each batch (mode watching).
+    """
+
+    BATCH_S = 0.002  # wake-up interval: a few steps per batch at 1 kHz
+    MAX_CATCH_UP_S = 1.0  # later than this (e.g. the process was stopped): skip ahead instead
+
+    def __init__(self, device: VirtualDevice, *, take_input: Callable[[], bytes], deliver: Callable[[bytes], None],
+                 backlog: Callable[[], int] = lambda: 0, max_backlog: int = 65536,
+                 on_batch: Callable[[], None] | None = None, name: str = "rodsim"):
+        self.device = device
+        self._take_input = take_input
+        self._deliver = deliver
+        self._backlog = backlog
+        self.max_backlog = max_backlog
+        self._on_batch = on_batch
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self.error: BaseException | None = None
+        self.skipped_steps = 0  # steps skipped after a stall longer than MAX_CATCH_UP_S
+        self.max_lateness = 0.0  # worst lag behind the wall clock [s]
+
+    def start(self) -> "RealTimeRunner":
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(timeout=5)
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    def _run(self) -> None:
+        dev = self.device
+        period = dev.period
+        pending = b""
+        t0 = time.perf_counter()
+        done = 0  # steps run since t0
+        try:
+            while not self._stop.is_set():
+                now = time.perf_counter()
+                due = int((now - t0) / period) + 1
+                late = (due - done - 1) * period
+                if late > self.max_lateness:
+                    self.max_lateness = late
+                if late > self.MAX_CATCH_UP_S:
+                    skip = due - done - 1
+                    self.skipped_steps += skip
+                    t0 += skip * period
+                    due -= skip
+                new = self._take_input()
+                if new:
+                    pending += new
+                out = []
+                read = self._backlog() < self.max_backlog
+                while done < due:
+                    if pending:
+                        taken = dev.write(pending)
+                        pending = pending[taken:]
+                    dev.step()
+                    if read:
+                        b = dev.read()
+                        if b:
+                            out.append(b)
+                    done += 1
+                if out:
+                    self._deliver(b"".join(out))
+                if self._on_batch is not None:
+                    self._on_batch()
+                wait = t0 + done * period + self.BATCH_S - time.perf_counter()
+                if wait > 0:
+                    self._stop.wait(wait)
+        except BaseException as e:  # noqa: BLE001 - reported to the port's reader as a disconnect
+            self.error = e
