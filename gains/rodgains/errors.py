@@ -7,6 +7,12 @@ class UserError(Exception):
     exit_code = 1
 
 
+class InputError(UserError):
+    """A file, path or value the user gave cannot be used (missing folder, wrong kind of file, out of range)."""
+
+    exit_code = 2
+
+
 class ParamError(UserError):
     """A parameter file or --set override is wrong (unknown/missing key, type, value)."""
 

@@ -1,21 +1,55 @@
-"""Where things live in a checkout. rodctl runs from a clone installed with `pip install -e .`."""
+"""Where things live: in a clone (pip install -e .), or in the installed package (wheel, pipx).
+
+A clone is preferred whenever this module sits inside one (host/rodctl/ with firmware/ beside
+host/). Otherwise the wheel's copy is used: setup.py copies the protocol definition, the core and
+SIL C sources and the committed parameters into rodctl/_firmware/ at build time, which is enough
+for `rodctl sim`, `gains` and the protocol tools; firmware builds and flashing need the clone's
+PlatformIO project and say so (require_checkout). Build products never go into site-packages:
+outside a clone they go to the user's cache folder.
+"""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
-from rodgains.errors import UserError
+from rodgains.errors import InputError, UserError
 
-REPO = Path(__file__).resolve().parents[2]
-FIRMWARE = REPO / "firmware"
+PACKAGE = Path(__file__).resolve().parent
+_CLONE = PACKAGE.parents[1]
+PACKAGED_FIRMWARE = PACKAGE / "_firmware"  # written by setup.py's build_py into the wheel
+
+
+def _is_clone(root: Path) -> bool:
+    return (root / "firmware" / "protocol" / "rodlink.toml").is_file() and (root / "platformio.ini").is_file()
+
+
+def _user_cache() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "rodctl"
+
+
+IN_CLONE = _is_clone(_CLONE)
+REPO = _CLONE if IN_CLONE else PACKAGED_FIRMWARE.parent  # shown paths are relative to this
+FIRMWARE = _CLONE / "firmware" if IN_CLONE else PACKAGED_FIRMWARE
 CORE_SRC = FIRMWARE / "src" / "core"
+SIL_SRC = FIRMWARE / "sil"
+SPEC = FIRMWARE / "protocol" / "rodlink.toml"
 COMMITTED_HEADER = FIRMWARE / "include" / "rod_gains.h"
 COMMITTED_PARAMS = FIRMWARE / "include" / "rod_gains.toml"
-BUILD = REPO / "build"
+# RODCTL_BUILD_DIR: where SIL libraries, logs of firmware builds and benches go
+BUILD = Path(os.environ["RODCTL_BUILD_DIR"]) if os.environ.get("RODCTL_BUILD_DIR") else (
+    _CLONE / "build" if IN_CLONE else _user_cache() / "build")
+
+
+def require_checkout(what: str) -> None:
+    """UserError (one line, exit 2) when rodctl runs from an installed package, not a clone."""
+    if not IN_CLONE:
+        raise InputError(f"{what} needs a clone of this repository (its PlatformIO project and firmware/): "
+                        f"git clone it, then `pip install -e .` inside it; this rodctl runs from {PACKAGE}")
 
 
 def require_firmware_sources() -> None:
-    if not CORE_SRC.is_dir():
-        raise UserError(
-            f"firmware sources not found at {CORE_SRC}: run rodctl from a clone installed with `pip install -e .`"
-        )
+    if not (CORE_SRC.is_dir() and SIL_SRC.is_dir()):
+        raise UserError(f"firmware sources not found at {FIRMWARE}: reinstall rodctl, or run it from a clone "
+                        f"installed with `pip install -e .`")

@@ -6,6 +6,7 @@ import hashlib
 import os
 import shutil
 import subprocess
+import uuid
 from pathlib import Path
 
 from rodgains.errors import UserError
@@ -38,6 +39,15 @@ def _headers(include_dirs: list[Path]) -> list[Path]:
     return out
 
 
+def first_error(stderr: str) -> str:
+    """The compiler's first `error:` line (not the "In file included from" chain before it)."""
+    lines = [x.strip() for x in stderr.strip().splitlines() if x.strip()]
+    for x in lines:
+        if "error:" in x:
+            return x
+    return lines[0] if lines else "(no output)"
+
+
 def compile_shared(
     name: str,
     sources: list[Path],
@@ -58,16 +68,19 @@ def compile_shared(
     for f in sources + _headers(include_dirs):
         parts += [str(f.name).encode(), f.read_bytes()]
     out_dir = Path(out_dir or paths.BUILD / "native")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise UserError(f"cannot create the build folder {out_dir}: {e.strerror or e} "
+                        "(set RODCTL_BUILD_DIR to a writable folder)") from None
     lib = out_dir / f"lib{name}-{_digest(parts)}.so"
     if lib.exists():
         return lib
-    tmp = lib.with_suffix(f".{os.getpid()}.tmp")
+    tmp = lib.with_suffix(f".{uuid.uuid4().hex}.tmp")  # unique per process, thread and host (shared build dirs)
     cmd = [cc, *argv_flags, *map(str, sources), "-o", str(tmp), "-lm"]
     result = subprocess.run(cmd, capture_output=True, text=True)
     if result.returncode != 0:
         tmp.unlink(missing_ok=True)
-        first = (result.stderr.strip().splitlines() or ["(no output)"])[0]
-        raise UserError(f"compiling {name} failed: {first}")
+        raise UserError(f"compiling {name} failed: {first_error(result.stderr)}")
     os.replace(tmp, lib)  # atomic: concurrent builds of the same inputs are harmless
     return lib

@@ -13,13 +13,15 @@ from __future__ import annotations
 
 import argparse
 import os
+import uuid
 from pathlib import Path
 
-from rodctl.build import native
+from rodgains.errors import UserError
 
 from rodctl import paths
+from rodctl.build import native
 
-SIL_DIR = paths.FIRMWARE / "sil"
+SIL_DIR = paths.SIL_SRC
 LIB_NAME = "rodsil"
 
 
@@ -40,13 +42,22 @@ def write_header(params, command: str | None = None, out_root: Path | None = Non
         command = regenerate_command(ns)
     text = header_text(design(params), command)
     folder = Path(out_root or paths.BUILD / "sil") / params.sha256()[:16]
-    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise UserError(f"cannot create the build folder {folder}: {e.strerror or e} "
+                        "(set RODCTL_BUILD_DIR to a writable folder)") from None
     header = folder / "rod_gains.h"
     if not header.exists() or header.read_text() != text:
-        tmp = header.with_suffix(f".{os.getpid()}.tmp")
+        tmp = header.with_suffix(f".{uuid.uuid4().hex}.tmp")  # unique per process, thread and host
         tmp.write_text(text)
         os.replace(tmp, header)  # atomic: a concurrent build never sees half a header
     return folder
+
+
+# (parameters hash, command, out_dir) -> library: a process (a pool or Dask worker running many runs
+# of one design) designs and hashes the sources once per distinct parameter set, not once per run.
+_BUILT: dict[tuple, Path] = {}
 
 
 def build_sil(params=None, command: str | None = None, out_dir: Path | None = None) -> Path:
@@ -55,11 +66,17 @@ def build_sil(params=None, command: str | None = None, out_dir: Path | None = No
         from rodgains.params import load_params
 
         params = load_params()
+    memo = (params.sha256(), command, str(out_dir))
+    lib = _BUILT.get(memo)
+    if lib is not None and lib.exists():
+        return lib
     header_dir = write_header(params, command)
-    return native.compile_shared(
+    lib = native.compile_shared(
         LIB_NAME,
         sil_sources(),
         include_dirs=[header_dir, paths.CORE_SRC, SIL_DIR],
         flags=("-O2",) + native.FIRMWARE_WARNINGS,
         out_dir=out_dir,
     )
+    _BUILT[memo] = lib
+    return lib

@@ -35,13 +35,17 @@ _NET_ERRORS = ("HTTPClientError", "InternetConnectionError", "ConnectionError", 
                "Name or service not known", "Max retries exceeded", "Temporary failure in name resolution")
 
 
+def module_available(name: str) -> bool:
+    return importlib.util.find_spec(name) is not None
+
+
 def find_platformio() -> list[str]:
     """The command that runs PlatformIO; UserError when it is not installed."""
     for name in ("pio", "platformio"):
         path = shutil.which(name)
         if path:
             return [path]
-    if importlib.util.find_spec("platformio") is not None:
+    if module_available("platformio"):
         return [sys.executable, "-m", "platformio"]
     raise UserError("PlatformIO not found (no `pio` or `platformio` on PATH, no `python3 -m platformio`): "
                     "install it with `pip install platformio` (or `pip install -e '.[flash]'`)")
@@ -88,7 +92,7 @@ def platform_installed(name: str) -> bool:
     return any(p.is_dir() and (p.name == name or p.name.startswith(name + "@")) for p in d.iterdir())
 
 
-def registry_reachable(timeout: float = 3.0) -> bool:
+def registry_reachable(timeout: float = 3.0, host: str = REGISTRY_HOST, port: int = 443) -> bool:
     """Can PlatformIO reach its registry? (True behind a proxy: we cannot tell from here.)"""
     if any(os.environ.get(k) for k in ("HTTPS_PROXY", "https_proxy", "HTTP_PROXY", "http_proxy", "ALL_PROXY")):
         return True
@@ -96,7 +100,7 @@ def registry_reachable(timeout: float = 3.0) -> bool:
 
     def probe():
         try:
-            socket.create_connection((REGISTRY_HOST, 443), timeout=timeout).close()
+            socket.create_connection((host, port), timeout=timeout).close()
             result.append(True)
         except OSError:
             result.append(False)
@@ -201,6 +205,8 @@ def run_pio(cmd: list[str], project: Path, env: str, what: str, platform: str, v
 
 def run(args, upload: bool) -> int:
     what = "flash" if upload else "build"
+    if not args.project_dir:
+        paths.require_checkout(f"rodctl {what}")
     pio = find_platformio()
     project = Path(args.project_dir) if args.project_dir else paths.REPO
     platform = env_platform(project, args.env)

@@ -269,6 +269,8 @@ def _decoder_source(m: Message) -> str:
     parts = []
     if m.variable:
         cf = m.field(m.count_field)
+        lines.append(f"    if plen < {_MIN_PACKET + m.size_fixed}:")  # the count byte itself may be missing
+        lines.append("        return None")
         lines.append(f"    n = ba[{1 + HEADER_SIZE + cf.offset}]")
         lines.append(f"    if n > {MAX_N} or plen != {_MIN_PACKET + m.size_fixed} + {m.size_per_n} * n:")
         lines.append("        return None")
@@ -362,7 +364,10 @@ def _decode_raw(f: bytes):
     dec = _DECODERS.get(ba[2])
     if dec is None:
         return _E_UNKNOWN
-    fr = dec(ba, plen)
+    try:
+        fr = dec(ba, plen)
+    except (IndexError, struct.error, ValueError):  # never raise on input: a decoder bug costs one frame
+        return _E_LENGTH
     return _E_LENGTH if fr is None else fr
 
 

@@ -27,14 +27,12 @@ import contextlib
 import itertools
 import math
 import os
-import re
 import threading
 import time
 from typing import Callable
 
-from rodgains.errors import UserError
+from rodgains.errors import InputError, UserError
 
-from rodctl import paths
 from rodctl.link import protocol as P
 from rodctl.link.ports import find_port
 
@@ -52,9 +50,10 @@ REASON_TEXT = {
     P.Reason.HEARTBEAT: "heartbeat lost",
     P.Reason.NON_FINITE: "non-finite estimate",
     P.Reason.OVERRUN: "control step overrun",
+    P.Reason.NO_TIMER: "the board's control timer did not start (reset the board)",
 }
 
-ARMED_MODES = (P.Mode.BALANCE, P.Mode.SWING_UP, P.Mode.CATCH)
+ARMED_MODES = (P.Mode.BALANCE, P.Mode.SWING_UP, P.Mode.CATCH, P.Mode.IDENTIFY)
 
 
 def name_of(enum_cls, value) -> str:
@@ -73,37 +72,57 @@ def reason_text(reason) -> str:
 
 # ---- run-time settings (SET) -------------------------------------------------------------------
 
-def _config_constants() -> dict[str, float]:
-    """Bounds the firmware checks a SET against, read from firmware/src/core/rod_config.h."""
-    out = {"ROD_DECIMATION_MIN": 1.0, "ROD_DECIMATION_MAX": 1000.0, "ROD_HEARTBEAT_TIMEOUT_MIN_S": 0.05,
-           "ROD_HEARTBEAT_TIMEOUT_MAX_S": 10.0}
-    try:
-        text = (paths.CORE_SRC / "rod_config.h").read_text()
-    except OSError:
-        return out
-    for name in out:
-        m = re.search(rf"#define\s+{name}\s+([0-9.eE+-]+)f?\b", text)
-        if m:
-            out[name] = float(m.group(1).rstrip("f"))
-    return out
-
-
 class Setting:
-    """One `rodctl set NAME=VALUE` name: its device parameter and the unit conversion."""
+    """One `rodctl set NAME=VALUE` name: its device parameter, unit conversion and physical range.
+
+    The range is the one in firmware/protocol/rodlink.toml (codes.param min / max / design_max),
+    which the firmware's rod_control_set checks too, converted to this setting's unit.
+    """
 
     def __init__(self, name: str, param, unit: str, hello_field: str, scale: float = 1.0, integer: bool = False):
         self.name, self.param, self.unit, self.hello_field = name, param, unit, hello_field
         self.scale = scale  # device value = user value * scale
         self.integer = integer
+        code = P.PARAM_INFO[param]
+        self.min = code.min / scale  # user unit
+        self.max = None if code.max is None else code.max / scale
+        self.design_max = code.design_max
 
     def parse(self, text: str) -> float:
+        """The value in the user's unit; UserError unless a finite number inside the fixed range."""
         try:
             v = float(text)
         except ValueError:
-            raise UserError(f"{self.name}: {text!r} is not a number") from None
+            raise InputError(f"{self.name}: {text!r} is not a number") from None
         if not math.isfinite(v):
-            raise UserError(f"{self.name}: {text!r} is not a finite number")
+            raise InputError(f"{self.name}: {text!r} is not a finite number")
+        self.check(v)
         return v
+
+    def ceiling(self, hello=None, design_params=None) -> float | None:
+        """Upper bound [user unit] including the design's (None: not known here)."""
+        hi = self.max
+        d = None
+        if self.design_max == "ROD_TORQUE_MAX_NM" and hello is not None:
+            d = float(hello.torque_max)
+        elif self.design_max == "ROD_ANGLE_LIMIT_RAD" and design_params is not None:
+            d = math.radians(design_params["safety"]["angle_limit_deg"])
+        elif self.design_max is not None:
+            return hi  # the design's bound is not known here: the device may still refuse below hi
+        if d is not None:
+            d /= self.scale
+            hi = d if hi is None else min(hi, d)
+        return hi
+
+    def check(self, v: float, hello=None, design_params=None) -> None:
+        """UserError when the device would refuse v [user unit] (as far as the host can tell)."""
+        hi = self.ceiling(hello, design_params)
+        # float32 rounding on the device: compare with a relative slack of 1e-6
+        bad = v < self.min * (1 - 1e-6) or (hi is not None and v > hi * (1 + 1e-6))
+        if self.integer and v != math.floor(v):
+            bad = True
+        if bad:
+            raise InputError(f"{self.name}={v:g} out of range: allowed {self.allowed(hello, design_params)}")
 
     def to_device(self, v: float) -> float:
         return v * self.scale
@@ -118,23 +137,20 @@ class Setting:
 
     def allowed(self, hello=None, design_params=None) -> str:
         """The range the firmware accepts, in this setting's unit."""
-        c = _config_constants()
         n = self.name
-        if n == "swing_amplitude":
-            tmax = f"{hello.torque_max:.6g}" if hello is not None else "torque_max"
-            return f"0 <= {n} <= {tmax} N m (the firmware's torque ceiling)"
-        if n == "swing_angle_deg":
-            return f"0 < {n} <= 180 deg"
-        if n == "catch_angle_deg":
-            if design_params is not None:
-                lim = min(design_params["safety"]["angle_limit_deg"], 90.0)
-                return f"0 < {n} < {lim:g} deg (the balance angle limit, at most 90 deg)"
-            return f"0 < {n} < min(balance angle limit, 90) deg"
-        if n == "telemetry_decimation":
-            return f"integer {c['ROD_DECIMATION_MIN']:g} <= {n} <= {c['ROD_DECIMATION_MAX']:g}"
-        if n == "heartbeat_timeout":
-            return f"{c['ROD_HEARTBEAT_TIMEOUT_MIN_S']:g} <= {n} <= {c['ROD_HEARTBEAT_TIMEOUT_MAX_S']:g} s"
-        return "see docs/protocol.md"
+        lo = f"{'integer ' if self.integer else ''}{self.min:.6g} <= {n} <= "
+        hi = self.ceiling(hello, design_params)
+        names = {"ROD_TORQUE_MAX_NM": "the firmware's torque ceiling",
+                 "ROD_ANGLE_LIMIT_RAD": "the balance angle limit"}
+        what = names.get(self.design_max, self.design_max)
+        if self.design_max is None:
+            return f"{lo}{hi:.6g} {self.unit}".rstrip()
+        known = (self.design_max == "ROD_TORQUE_MAX_NM" and hello is not None) or \
+                (self.design_max == "ROD_ANGLE_LIMIT_RAD" and design_params is not None)
+        if known:
+            return f"{lo}{hi:.6g} {self.unit} ({what}{f', at most {self.max:.6g} {self.unit}' if self.max else ''})"
+        bound = f"min({self.max:.6g}, {what})" if self.max is not None else what
+        return f"{lo}{bound} {self.unit}"
 
 
 _DEG = math.pi / 180.0
@@ -148,13 +164,13 @@ SETTINGS = {s.name: s for s in (
 
 
 def parse_assignment(text: str) -> tuple[Setting, float]:
-    """'NAME=VALUE' -> (Setting, value in the user's unit); UserError on a bad name or number."""
+    """'NAME=VALUE' -> (Setting, value in the user's unit); UserError on a bad name, number or range."""
     if "=" not in text:
-        raise UserError(f"expected NAME=VALUE, got {text!r} (names: {', '.join(SETTINGS)})")
+        raise InputError(f"expected NAME=VALUE, got {text!r} (names: {', '.join(SETTINGS)})")
     name, value = (x.strip() for x in text.split("=", 1))
     s = SETTINGS.get(name)
     if s is None:
-        raise UserError(f"unknown setting {name!r}: choose one of {', '.join(SETTINGS)}")
+        raise InputError(f"unknown setting {name!r}: choose one of {', '.join(SETTINGS)}")
     return s, s.parse(value)
 
 
@@ -181,9 +197,11 @@ def open_serial(port: str, timeout: float = 0.05):
         msg = str(e).strip()
         if "exclusively lock" in msg or "Resource temporarily unavailable" in msg:
             raise UserError(f"{port} is in use by another program (another rodctl?)") from None
-        if isinstance(e.__cause__ or e.__context__, FileNotFoundError) or "No such file" in msg:
+        if not is_url and (isinstance(e.__cause__ or e.__context__, FileNotFoundError) or "No such file" in msg):
             raise UserError(f"cannot open {port}: no such port (is the board plugged in? "
                             "`--port sim://` runs the simulated rod)") from None
+        if msg.startswith("sim://: "):  # the virtual board's own one-line reason (e.g. a missing params= file)
+            raise UserError(msg) from None
         raise UserError(f"cannot open {port}: {msg}") from None
     except (ValueError, OSError) as e:
         raise UserError(f"cannot open {port}: {e}") from None
@@ -236,6 +254,8 @@ class Session:
         self._err_base = (0, 0)
         self.closed = False
         self.disarm_acked = False  # close() sent DISARM and the device acknowledged it
+        self.reader_error: str | None = None  # why the reader thread stopped on its own, if it did
+        self.disarm_sent = False  # a DISARM went out without waiting for its ACK (reader stopped)
 
     # --- life cycle -------------------------------------------------------------------------
     def open(self) -> "Session":
@@ -336,6 +356,8 @@ class Session:
 
     def check(self) -> None:
         """Raise UserError when the link has ended (unplugged board, stopped virtual device)."""
+        if self.reader_error is not None:
+            raise UserError(f"{self.port}: {self.disconnected}")
         if self.disconnected is not None:
             raise UserError(f"{self.port}: device disconnected ({self.disconnected})")
 
@@ -375,6 +397,28 @@ class Session:
             return buf[i + 1:]
 
     def _read_loop(self) -> None:
+        try:
+            self._read_frames()
+        except BaseException as e:  # noqa: BLE001 - a reader that stops must not leave the board armed
+            if not self._stop.is_set():
+                self._reader_died(f"{type(e).__name__}: {e}")
+
+    def _reader_died(self, why: str) -> None:
+        """Nobody reads the link any more: stop the heartbeats (the board then disarms itself after its
+        heartbeat timeout even if the DISARM below is lost), send DISARM, and end the session so the
+        command's next check() fails and it exits non-zero."""
+        self.reader_error = why
+        self._hb_paused += 1
+        try:
+            wire = P.encode(P.Disarm(), next(self._seq) & 0xFFFFFFFF, int(time.monotonic() * 1e6) & 0xFFFFFFFF)
+            with self._write_lock:
+                self.ser.write(wire)  # no ACK can be read now: best effort, and the heartbeat stops anyway
+            self.disarm_sent = True
+        except Exception:  # noqa: BLE001
+            pass
+        self._lost(f"the host stopped reading the link ({why}); heartbeats stopped, DISARM sent")
+
+    def _read_frames(self) -> None:
         import serial
 
         ser = self.ser
@@ -587,6 +631,7 @@ class Session:
         """Set one run-time setting (value in the setting's user unit); returns the ack."""
         if isinstance(setting, str):
             setting = SETTINGS[setting]
+        setting.check(value, self.hello, design_params)
         try:
             return self.command(P.Set(setting.param, setting.to_device(value)),
                                 what=f"{setting.name}={value:g}")
@@ -595,6 +640,29 @@ class Session:
                 raise UserError(f"device refused {setting.name}={value:g}: allowed "
                                 f"{setting.allowed(self.hello, design_params)}") from None
             raise
+
+    def set_all(self, pairs: list[tuple[Setting, float]], design_params=None) -> dict[str, float]:
+        """Apply every (setting, value) or none; returns the device's settings afterwards (user units).
+
+        Every value is range-checked before the first SET goes out. Should the device still refuse
+        one (a bound the host could not know), the ones already applied are set back to the values
+        the device reported just before, and the refusal is raised.
+        """
+        for setting, value in pairs:
+            setting.check(value, self.hello, design_params)
+        before = hello_settings(self.request_hello())
+        done: list[Setting] = []
+        try:
+            for setting, value in pairs:
+                self.set(setting, value, design_params)
+                done.append(setting)
+        except BaseException:
+            for setting in reversed(done):
+                with contextlib.suppress(UserError):
+                    self.command(P.Set(setting.param, setting.to_device(before[setting.name])),
+                                 what=f"restore {setting.name}")
+            raise
+        return hello_settings(self.request_hello())
 
     # --- status -----------------------------------------------------------------------------
     def counters(self) -> dict[str, int]:

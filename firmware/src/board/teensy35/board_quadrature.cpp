@@ -1,19 +1,13 @@
 // board_quadrature.cpp -- FTM1 in quadrature decoder mode (K64 RM "Quadrature Decoder mode").
 //
-// Registers and bit names from PaulStoffregen/cores teensy3/kinetis.h (FTM1_*, FTM_MODE_*,
-// FTM_SC_*). kinetis.h names the QDCTRL/FILTER registers but not their bits, so those are below
-// with the reference manual's names. FTM1's clock gate is already on (mk20dx128.c ResetHandler:
-// SIM_SCGC6_FTM1), and _init_Teensyduino_internal_ left it running as a PWM timer.
-#include <Arduino.h>
+// Registers and bit names from PaulStoffregen/cores teensy3/kinetis.h: FTM1_*, FTM_MODE_*,
+// FTM_SC_*, FTM_QDCTRL_* and FTM_FILTER_CHnFVAL(). FTM1's clock gate is already on
+// (mk20dx128.c ResetHandler: SIM_SCGC6_FTM1), and _init_Teensyduino_internal_ left it running
+// as a PWM timer.
+#include "board_framework.h"
 
 #include "board_pins.h"
 #include "board_quadrature.h"
-
-#define QDCTRL_QUADEN 0x01u     // quadrature decoder mode enable (QUADMODE 0: phase A/B)
-#define QDCTRL_PHBFLTREN 0x40u  // phase B input filter enable
-#define QDCTRL_PHAFLTREN 0x80u  // phase A input filter enable
-#define FILTER_CH0FVAL(n) ((uint32_t)((n) & 15u) << 0)  // phase A filter (channel 0)
-#define FILTER_CH1FVAL(n) ((uint32_t)((n) & 15u) << 4)  // phase B filter (channel 1)
 
 static uint16_t last_hw;
 static int32_t extended;
@@ -27,8 +21,9 @@ void board_quadrature_begin()
     FTM1_C1SC = 0;
     FTM1_CNTIN = 0;
     FTM1_MOD = 0xFFFF;
-    FTM1_FILTER = FILTER_CH0FVAL(BOARD_ENCODER_FILTER) | FILTER_CH1FVAL(BOARD_ENCODER_FILTER);
-    FTM1_QDCTRL = QDCTRL_PHAFLTREN | QDCTRL_PHBFLTREN | QDCTRL_QUADEN;
+    // Channel 0 filters phase A, channel 1 phase B; QUADMODE left 0: phase A/B encoding.
+    FTM1_FILTER = FTM_FILTER_CH0FVAL(BOARD_ENCODER_FILTER) | FTM_FILTER_CH1FVAL(BOARD_ENCODER_FILTER);
+    FTM1_QDCTRL = FTM_QDCTRL_PHAFLTREN | FTM_QDCTRL_PHBFLTREN | FTM_QDCTRL_QUADEN;
     FTM1_CNT = 0;  // any write loads CNTIN
     FTM1_SC = FTM_SC_CLKS(1) | FTM_SC_PS(0);  // system clock for the filters, no prescaler
     // ALT7 = FTM1_QD_PHA / FTM1_QD_PHB; pull-ups keep the lines defined if the encoder is unplugged.

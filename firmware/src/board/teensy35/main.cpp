@@ -11,11 +11,7 @@
 // begin(f, unsigned us)), usb_serial.h (available, readBytes, availableForWrite, write),
 // usb_serial.c (write_buffer_free semantics), pins_teensy.c (analogWrite*, micros is ISR-safe),
 // core_pins.h (digitalWriteFast, CORE_PINn_*), kinetis.h (NVIC_SET_PRIORITY, IRQ_PORTD).
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wdouble-promotion"  // framework headers, not ours
-#include <Arduino.h>
-#include <IntervalTimer.h>
-#pragma GCC diagnostic pop
+#include "board_framework.h"
 
 #include <math.h>
 
@@ -40,6 +36,7 @@ static volatile bool nfault_seen;    // set by the nFAULT edge, consumed by the 
 static volatile uint32_t steps_run;  // advances every step: the watchdog's proof of life
 static uint32_t last_step_us;        // CPU time of the previous step (control ISR only)
 static uint32_t pwm_level = 0;       // last analogWrite value (control ISR only)
+static bool timer_failed;            // control_timer.begin() refused: loop() steps, driver off
 
 static const uint32_t PWM_FULL = 1u << BOARD_PWM_RESOLUTION_BITS;
 
@@ -118,9 +115,21 @@ static void service_rx()
 
 static uint8_t tx_buf[ROD_DEVICE_FRAME_MAX];
 static size_t tx_len, tx_sent;
+static bool tx_cut;  // part of a dropped frame went out: end it with a delimiter before the next
 
 static void service_tx()
 {
+    if (tx_cut) {
+        // Without this 0x00 the host would glue the next frame onto the cut one and lose both.
+        if (Serial.availableForWrite() <= 0) {
+            return;
+        }
+        static const uint8_t delimiter = 0;
+        if (Serial.write(&delimiter, 1) != 1) {
+            return;
+        }
+        tx_cut = false;
+    }
     for (;;) {
         if (tx_sent == tx_len) {
             tx_len = rod_device_tx(&device, tx_buf, sizeof tx_buf);
@@ -143,7 +152,17 @@ static void service_tx()
         if (n > (size_t)room) {
             n = (size_t)room;
         }
-        Serial.write(tx_buf + tx_sent, n);
+        size_t written = Serial.write(tx_buf + tx_sent, n);  // usb_serial_write: bytes taken, or 0 on error
+        if (written != n) {
+            // Failed or partial (usb_serial_write's -1 becomes a huge size_t): the frame is dropped
+            // and counted (a sequence gap on the host). Whatever part of it went out is cut off by
+            // a delimiter first thing next time (a spare 0x00 is harmless: an idle line).
+            rod_device_count_tx_drop(&device);
+            tx_cut = true;
+            tx_len = 0;
+            tx_sent = 0;
+            return;
+        }
         tx_sent += n;
     }
 }
@@ -152,13 +171,34 @@ static void service_watchdog()
 {
 #if BOARD_WATCHDOG_ENABLED
     // Refresh only while the control interrupt is alive too: a stopped timer also resets.
+    // (When the timer failed, fallback_step below advances steps_run: the loop is then the proof.)
     static uint32_t steps_at_refresh;
     uint32_t steps = steps_run;
-    if (steps != steps_at_refresh) {
+    if (steps != steps_at_refresh && board_watchdog_refresh()) {
         steps_at_refresh = steps;
-        board_watchdog_refresh();
     }
 #endif
+}
+
+// Without the control timer: step the device from loop() about once a period, outputs never
+// applied (nEN stays high). rod_device_board_fault keeps it in FAULT, so it only reports.
+static void fallback_step()
+{
+    static uint32_t last_us;
+    uint32_t now = micros();
+    if (now - last_us < ROD_LOOP_PERIOD_US) {
+        return;
+    }
+    last_us = now;
+    rod_inputs_t in;
+    in.now_us = now;
+    in.encoder_count = board_quadrature_count();
+    in.last_step_us = 0;
+    in.driver_fault = digitalReadFast(BOARD_PIN_NFAULT) == LOW;
+    rod_outputs_t out;
+    rod_device_step(&device, &in, &out);
+    digitalWriteFast(BOARD_PIN_NEN, HIGH);
+    steps_run = steps_run + 1;
 }
 
 static void service_led()
@@ -168,7 +208,7 @@ static void service_led()
     bool on;
     if (mode == ROD_MODE_BALANCE) {
         on = true;
-    } else if (mode == ROD_MODE_SWING_UP || mode == ROD_MODE_CATCH) {
+    } else if (mode == ROD_MODE_SWING_UP || mode == ROD_MODE_CATCH || mode == ROD_MODE_IDENTIFY) {
         on = (ms / 250u) % 2u == 0u;
     } else if (mode == ROD_MODE_FAULT) {
         on = (ms / 60u) % 2u == 0u;
@@ -199,11 +239,21 @@ void setup()
     ARM_DWT_CTRL |= ARM_DWT_CTRL_CYCCNTENA;
 
     board_quadrature_begin();
+    // May block for up to about 2 s on some Teensyduino cores (1.62 waits for a host to open the
+    // port; other versions return at once). Nothing depends on it: the driver is already off
+    // (nEN high above), the control timer and watchdog start after it, and every USB call in
+    // loop() is non-blocking and copes with no host (frames are dropped and counted).
     Serial.begin(115200);  // USB: the baud rate is ignored
     rod_device_init(&device);
 
     control_timer.priority(BOARD_CONTROL_IRQ_PRIORITY);  // before begin(): begin applies it
-    control_timer.begin(control_step, ROD_LOOP_PERIOD_US);
+    if (!control_timer.begin(control_step, ROD_LOOP_PERIOD_US)) {
+        // No PIT channel (or a period out of range): nothing would run the control. The driver
+        // stays off for good; loop() steps the device itself so HELLO and telemetry tell the host
+        // (FAULT, reason NO_TIMER), and the LED shows the FAULT pattern.
+        timer_failed = true;
+        rod_device_board_fault(&device, ROD_REASON_NO_TIMER);
+    }
 #if BOARD_WATCHDOG_ENABLED
     board_watchdog_begin(BOARD_WATCHDOG_TIMEOUT_MS);
 #endif
@@ -211,6 +261,9 @@ void setup()
 
 void loop()
 {
+    if (timer_failed) {
+        fallback_step();
+    }
     service_rx();
     service_tx();
     service_watchdog();

@@ -1,0 +1,134 @@
+// Runs the board layer (firmware/src/board/teensy35/*.cpp) on the host against the stand-in API
+// in this folder: simulated time, a USB port that records what the board writes (and can fail
+// chosen writes), a timer that can refuse to start, and a recording watchdog. Used by
+// tests/test_board_layer.py:
+//   board_harness SECONDS TIMER_OK(0|1) FAIL_WRITES(first,count) HOST_HEX
+// FAIL_WRITES counts the writes of frame data (more than one byte); those write half their bytes.
+// Prints `serial HEX` (every byte the board wrote), then key=value lines.
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <vector>
+
+#include "Arduino.h"
+#include "IntervalTimer.h"
+
+volatile uint32_t stub_reg32[1024];
+volatile uint16_t stub_reg16[64];
+usb_serial_class Serial;
+stub_refresh_register stub_wdog_refresh;
+
+static uint64_t now_us;
+static uint8_t pins[64];
+static bool nen_low_ever;
+static unsigned led_toggles;
+static bool timer_ok = true;
+static void (*timer_isr)() = nullptr;
+static long write_calls, fail_first = -1, fail_count;
+static std::vector<uint8_t> out_bytes, host_bytes;
+static size_t host_pos;
+static std::vector<uint64_t> refresh_ms;
+static uint16_t last_refresh_value;
+
+void digitalWriteFast(uint8_t pin, uint8_t val)
+{
+    if (pin == 13 && pins[pin] != val) {
+        led_toggles++;
+    }
+    pins[pin] = val;
+}
+uint8_t digitalReadFast(uint8_t pin) { return pin == 8 ? HIGH : pins[pin]; }  // nFAULT: no fault
+void pinMode(uint8_t, uint8_t) {}
+void analogWrite(uint8_t, int) {}
+void analogWriteResolution(uint32_t) {}
+void analogWriteFrequency(uint8_t, float) {}
+void attachInterrupt(uint8_t, void (*)(void), int) {}
+uint32_t micros(void) { return (uint32_t)now_us; }
+uint32_t millis(void) { return (uint32_t)(now_us / 1000u); }
+
+stub_refresh_register &stub_refresh_register::operator=(uint16_t value)
+{
+    if (last_refresh_value == 0xA602 && value == 0xB480) {
+        refresh_ms.push_back(now_us / 1000u);
+    }
+    last_refresh_value = value;
+    return *this;
+}
+
+bool IntervalTimer::begin(void (*isr)(), unsigned int)
+{
+    if (timer_ok) {
+        timer_isr = isr;
+    }
+    return timer_ok;
+}
+void IntervalTimer::priority(uint8_t) {}
+
+void usb_serial_class::begin(long) {}
+int usb_serial_class::available() { return (int)(host_bytes.size() - host_pos); }
+size_t usb_serial_class::readBytes(char *buffer, size_t length)
+{
+    size_t n = 0;
+    while (n < length && host_pos < host_bytes.size()) {
+        buffer[n++] = (char)host_bytes[host_pos++];
+    }
+    return n;
+}
+int usb_serial_class::availableForWrite() { return 64; }
+size_t usb_serial_class::write(const uint8_t *buffer, size_t size)
+{
+    long call = size > 1 ? write_calls++ : -2;  // frame data, not a lone delimiter
+    if (call >= fail_first && call < fail_first + fail_count) {
+        size_t half = size / 2;  // a partial write: half the bytes go out
+        out_bytes.insert(out_bytes.end(), buffer, buffer + half);
+        return half;
+    }
+    out_bytes.insert(out_bytes.end(), buffer, buffer + size);
+    return size;
+}
+
+void setup();
+void loop();
+
+int main(int argc, char **argv)
+{
+    double seconds = argc > 1 ? atof(argv[1]) : 1.0;
+    timer_ok = argc > 2 ? atoi(argv[2]) != 0 : true;
+    if (argc > 3) {
+        sscanf(argv[3], "%ld,%ld", &fail_first, &fail_count);
+    }
+    if (argc > 4) {
+        for (const char *p = argv[4]; p[0] && p[1]; p += 2) {
+            unsigned v;
+            sscanf(p, "%2x", &v);
+            host_bytes.push_back((uint8_t)v);
+        }
+    }
+    pins[7] = HIGH;  // nEN's pull-up
+    setup();
+    uint64_t next_isr = now_us + 1000u;
+    uint64_t end = now_us + (uint64_t)(seconds * 1e6);
+    while (now_us < end) {
+        now_us += 50u;
+        if (timer_isr != nullptr && now_us >= next_isr) {
+            next_isr += 1000u;
+            timer_isr();
+        }
+        if (pins[7] == LOW) {
+            nen_low_ever = true;
+        }
+        loop();
+    }
+    printf("serial ");
+    for (uint8_t b : out_bytes) {
+        printf("%02x", b);
+    }
+    printf("\nnen_low_ever=%d\nled_toggles=%u\nwdog_presc=%u\nwdog_stctrlh=%u\nrefresh_ms=", nen_low_ever ? 1 : 0,
+           led_toggles, (unsigned)WDOG_PRESC, (unsigned)WDOG_STCTRLH);
+    for (size_t i = 0; i < refresh_ms.size(); i++) {
+        printf(i ? ",%llu" : "%llu", (unsigned long long)refresh_ms[i]);
+    }
+    printf("\n");
+    return 0;
+}

@@ -1,0 +1,67 @@
+"""Inputs a user can get wrong end in one line naming the problem, never "internal error"."""
+
+from __future__ import annotations
+
+import pytest
+
+from host_tools import rodctl_env, run_rodctl
+
+
+def _one_line(r) -> str:
+    assert "Traceback" not in r.stderr and "internal error" not in r.stderr, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1, r.stderr
+    return lines[0]
+
+
+def test_binary_params_file_is_named(tmp_path):
+    f = tmp_path / "rod.toml"
+    f.write_bytes(b"\x00\xff\xfe\x89PNG\r\n")
+    r = run_rodctl("gains", "--params", str(f), "--header", str(tmp_path / "h" / "rod_gains.h"))
+    assert r.returncode == 2
+    assert _one_line(r) == f"rodctl: {f}: not a parameter file (not UTF-8 text; expected TOML)"
+    assert not (tmp_path / "h").exists()
+
+
+def test_gains_json_into_a_missing_folder_writes_nothing(tmp_path):
+    header = tmp_path / "rod_gains.h"
+    r = run_rodctl("gains", "--json", "/nonexistent/d.json", "--header", str(header))
+    assert r.returncode == 2
+    assert _one_line(r) == "rodctl: --json /nonexistent/d.json: folder /nonexistent does not exist"
+    assert not header.exists()  # checked before anything was designed or written
+
+
+def test_gains_json_onto_a_folder(tmp_path):
+    r = run_rodctl("gains", "--json", str(tmp_path))
+    assert r.returncode == 2
+    assert _one_line(r) == f"rodctl: --json {tmp_path}: is a folder"
+
+
+@pytest.mark.parametrize("value", ["1e42", "1e-40", "nan", "inf", "-3"])
+def test_set_out_of_range_before_opening_the_port(value):
+    """Checked before the port is opened: no board is needed to be told."""
+    r = run_rodctl("set", f"catch_angle_deg={value}", "--port", "/dev/ttyNOPE0")
+    assert r.returncode == 2
+    line = _one_line(r)
+    assert line.startswith("rodctl: catch_angle_deg")
+    assert "2 <= catch_angle_deg" in line or "not a finite number" in line
+
+
+def test_missing_params_file_of_a_sim_url_is_named():
+    r = run_rodctl("status", "--port", "sim://?params=missing.toml")
+    assert r.returncode != 0
+    assert _one_line(r) == "rodctl: sim://: missing.toml: cannot read parameter file (No such file or directory)"
+
+
+def test_sim_compile_failure_is_one_clear_line(tmp_path):
+    """The compiler's first `error:` line, not the "In file included from" chain before it."""
+    cc = tmp_path / "cc"
+    cc.write_text("#!/bin/sh\necho 'In file included from rod_control.c:1:' >&2\n"
+                  "echo 'rod_config.h:97:1: error: static assertion failed' >&2\nexit 1\n")
+    cc.chmod(0o755)
+    env = rodctl_env(CC=str(cc), RODCTL_BUILD_DIR=str(tmp_path / "build"))
+    r = run_rodctl("sim", "--duration", "0.2", "--no-plot", "--no-log", env=env)
+    assert r.returncode != 0
+    assert "Traceback" not in r.stderr and "internal error" not in r.stderr
+    assert r.stderr.strip().splitlines()[-1] == ("rodctl: compiling rodsil failed: "
+                                                 "rod_config.h:97:1: error: static assertion failed")

@@ -1,0 +1,147 @@
+"""rodctl build / flash: each branch (PlatformIO there or not, platform installed or not, registry
+reachable or not), chosen by what the code is shown (PATH, PLATFORMIO_CORE_DIR, the registry probe),
+never by what this machine happens to have installed or whether it is online."""
+
+from __future__ import annotations
+
+import socket
+import stat
+
+import pytest
+
+from rodctl import cli, paths
+from rodctl.cli import flash as cmd_flash
+
+
+@pytest.fixture
+def no_pio(tmp_path, monkeypatch):
+    """A machine where PlatformIO was never installed: empty PATH, no platformio module."""
+    empty = tmp_path / "bin-empty"
+    empty.mkdir()
+    monkeypatch.setenv("PATH", str(empty))
+    monkeypatch.setattr(cmd_flash, "module_available", lambda name: False)
+    monkeypatch.setenv("PLATFORMIO_CORE_DIR", str(tmp_path / "pio-core"))
+    monkeypatch.delenv("PLATFORMIO_PLATFORMS_DIR", raising=False)
+
+
+def _fake_pio(tmp_path, monkeypatch, output: str = "", code: int = 0, platform_installed: bool = False):
+    """A `pio` on PATH that prints `output` and exits `code`; records its arguments."""
+    bindir = tmp_path / "bin"
+    bindir.mkdir()
+    pio = bindir / "pio"
+    (tmp_path / "pio-output.txt").write_text(output)
+    pio.write_text(f"#!/bin/sh\necho \"$@\" > '{tmp_path}/pio-args.txt'\n"  # shell builtins only: PATH is just bin/
+                   f"while IFS= read -r line; do echo \"$line\"; done < '{tmp_path}/pio-output.txt'\nexit {code}\n")
+    pio.chmod(pio.stat().st_mode | stat.S_IXUSR)
+    monkeypatch.setenv("PATH", str(bindir))
+    monkeypatch.setattr(cmd_flash, "module_available", lambda name: False)
+    core = tmp_path / "pio-core"
+    if platform_installed:
+        (core / "platforms" / "teensy").mkdir(parents=True)
+    monkeypatch.setenv("PLATFORMIO_CORE_DIR", str(core))
+    monkeypatch.delenv("PLATFORMIO_PLATFORMS_DIR", raising=False)
+    monkeypatch.setattr(paths, "BUILD", tmp_path / "build")
+    return tmp_path / "pio-args.txt"
+
+
+def _offline(monkeypatch):
+    monkeypatch.setattr(cmd_flash, "registry_reachable", lambda *a, **k: False)
+
+
+def _online(monkeypatch):
+    monkeypatch.setattr(cmd_flash, "registry_reachable", lambda *a, **k: True)
+
+
+def _project(tmp_path, ini: str = "[env:teensy35]\nplatform = teensy\n"):
+    d = tmp_path / "proj"
+    d.mkdir()
+    (d / "platformio.ini").write_text(ini)
+    return d
+
+
+def _one_line(capsys) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    return err[0]
+
+
+@pytest.mark.parametrize("command", [["build"], ["flash", "--upload-port", "/dev/ttyACM0"]])
+def test_without_platformio_build_and_flash_say_how_to_install_it(no_pio, capsys, command):
+    header = paths.COMMITTED_HEADER.read_bytes()
+    assert cli.main(command) == 1
+    line = _one_line(capsys)
+    assert line.startswith("rodctl: PlatformIO not found")
+    assert "pip install platformio" in line
+    assert paths.COMMITTED_HEADER.read_bytes() == header  # nothing touched before failing
+
+
+@pytest.mark.parametrize("command", [["build"], ["flash", "--upload-port", "/dev/ttyACM0"]])
+def test_offline_without_the_platform_is_one_clear_line(tmp_path, monkeypatch, capsys, command):
+    args_file = _fake_pio(tmp_path, monkeypatch)
+    _offline(monkeypatch)
+    header = paths.COMMITTED_HEADER.read_bytes()
+    assert cli.main([*command, "--project-dir", str(_project(tmp_path))]) == 1
+    line = _one_line(capsys)
+    assert line.startswith("rodctl: PlatformIO could not install platform teensy (no internet?)")
+    assert "pio pkg install -g -p teensy" in line
+    assert not args_file.exists()  # PlatformIO was never started
+    assert paths.COMMITTED_HEADER.read_bytes() == header
+
+
+def test_missing_environment_is_one_line(tmp_path, monkeypatch, capsys):
+    _fake_pio(tmp_path, monkeypatch)
+    _offline(monkeypatch)
+    proj = _project(tmp_path, "[env:uno]\nplatform = atmelavr\n")
+    assert cli.main(["build", "--project-dir", str(proj)]) == 1
+    assert _one_line(capsys) == f"rodctl: {proj / 'platformio.ini'} has no [env:teensy35] (environments: uno)"
+
+
+def test_online_without_the_platform_runs_platformio_and_summarizes_its_failure(tmp_path, monkeypatch, capsys):
+    """Registry reachable: PlatformIO is left to install the platform; its failure is one line."""
+    out = "Platform Manager: Installing teensy\nHTTPClientError: \n"
+    args_file = _fake_pio(tmp_path, monkeypatch, output=out, code=1)
+    _online(monkeypatch)
+    assert cli.main(["build", "--project-dir", str(_project(tmp_path))]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("rodctl: build failed: PlatformIO could not install platform teensy (no internet?)")
+    assert args_file.read_text().split() == ["run", "-e", "teensy35"]
+
+
+def test_installed_platform_builds_offline(tmp_path, monkeypatch, capsys):
+    args_file = _fake_pio(tmp_path, monkeypatch, output="SUCCESS\n", platform_installed=True)
+    _offline(monkeypatch)
+    assert cli.main(["build", "--project-dir", str(_project(tmp_path))]) == 0
+    assert args_file.read_text().split() == ["run", "-e", "teensy35"]
+    assert "build: done" in capsys.readouterr().err
+
+
+def test_platformio_as_a_python_module_is_found(tmp_path, monkeypatch):
+    empty = tmp_path / "bin-empty"
+    empty.mkdir()
+    monkeypatch.setenv("PATH", str(empty))
+    monkeypatch.setattr(cmd_flash, "module_available", lambda name: name == "platformio")
+    assert cmd_flash.find_platformio()[1:] == ["-m", "platformio"]
+
+
+def test_registry_probe_sees_a_closed_and_an_open_port(monkeypatch):
+    for k in ("HTTPS_PROXY", "https_proxy", "HTTP_PROXY", "http_proxy", "ALL_PROXY"):
+        monkeypatch.delenv(k, raising=False)
+    with socket.socket() as srv:
+        srv.bind(("127.0.0.1", 0))
+        srv.listen(1)
+        port = srv.getsockname()[1]
+        assert cmd_flash.registry_reachable(timeout=5, host="127.0.0.1", port=port)
+    with socket.socket() as s:  # bound, not listening: connections are refused
+        s.bind(("127.0.0.1", 0))
+        closed = s.getsockname()[1]
+        assert not cmd_flash.registry_reachable(timeout=5, host="127.0.0.1", port=closed)
+    monkeypatch.setenv("HTTPS_PROXY", "http://proxy.invalid:3128")  # behind a proxy we cannot tell: assume yes
+    assert cmd_flash.registry_reachable(timeout=5, host="127.0.0.1", port=closed)
+
+
+def test_outside_a_clone_build_and_flash_name_what_they_need(monkeypatch, capsys):
+    monkeypatch.setattr(paths, "IN_CLONE", False)
+    for command in (["build"], ["flash"], ["protocol"]):
+        assert cli.main(command) == 2
+        line = _one_line(capsys)
+        assert "needs a clone of this repository" in line and "pip install -e ." in line

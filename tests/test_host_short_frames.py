@@ -1,0 +1,96 @@
+"""A CRC-valid TELEMETRY frame with a 0-1 byte payload, from a fake board on a pseudo-terminal:
+the decoder counts it as bad and goes on; and should the reader ever stop, the heartbeats stop, a
+DISARM goes out and the command exits non-zero."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import pytest
+
+from fake_board import FakeBoard
+from rodgains.errors import UserError
+
+from rodctl import cli
+from rodctl.link import protocol as P
+from rodctl.link.session import Session
+
+pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
+
+
+@pytest.mark.parametrize("payload", [b"", b"\x02", bytes(3)])
+def test_decoder_counts_a_short_telemetry_as_bad_and_never_raises(payload):
+    d = P.Decoder()
+    wire = P.encode_packet(P.MsgType.TELEMETRY, 1, 0, payload)
+    ok = P.encode(P.Ack(command=P.MsgType.ARM, result=0, command_seq=1, mode=1), 2)
+    frames = d.feed(wire + ok)
+    assert [f.type for f in frames] == [P.MsgType.ACK]  # the next frame still decodes
+    assert (d.length_errors, d.errors) == (1, 1)
+    with pytest.raises(P.ProtocolError, match="payload length"):
+        P.decode_frame(wire)
+
+
+def _wait(cond, timeout: float = 20.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.02)
+    return False
+
+
+def test_short_telemetry_from_the_board_is_counted_and_the_session_goes_on():
+    with FakeBoard() as board, Session(board.path) as s:
+        s.arm(P.ArmMode.SWING_UP)
+        board.inject += [board.short_telemetry(b""), board.short_telemetry(b"\x02")]
+        assert _wait(lambda: s.decoder.length_errors == 2)
+        seen = s.telemetry_seen
+        assert _wait(lambda: s.telemetry_seen > seen + 5)  # the reader still reads
+        t_bad = time.monotonic()
+        assert _wait(lambda: any(t > t_bad for t in board.times_of(P.MsgType.HEARTBEAT)))  # still armed, still alive
+        assert s.counters()["errors"] == 2
+    assert board.times_of(P.MsgType.DISARM)  # closing disarmed it
+
+
+def test_arm_command_keeps_going_over_a_short_frame(capsys):
+    with FakeBoard() as board:
+        board.inject += [board.short_telemetry(b"")]
+        assert cli.main(["arm", "--swing-up", "--duration", "1", "--port", board.path]) == 0
+    assert board.times_of(P.MsgType.DISARM)
+
+
+def test_when_the_reader_stops_heartbeats_stop_disarm_goes_out_and_the_command_fails(monkeypatch, capsys):
+    """Any failure in the reader thread (here an injected one) must not leave the board armed."""
+    real = Session._dispatch
+    calls = {"n": 0}
+
+    def failing_dispatch(self, frames, t):
+        if self._started and self.telemetry_seen > 20:
+            raise RuntimeError("injected reader failure")
+        return real(self, frames, t)
+
+    monkeypatch.setattr(Session, "_dispatch", failing_dispatch)
+    with FakeBoard() as board:
+        rc = cli.main(["arm", "--swing-up", "--duration", "30", "--port", board.path])
+        t_end = time.monotonic()
+        disarms = board.times_of(P.MsgType.DISARM)
+        assert disarms, "no DISARM after the reader stopped"
+        time.sleep(0.5)  # 5 heartbeat intervals: none may come after the DISARM
+        beats_after = [t for t in board.times_of(P.MsgType.HEARTBEAT) if t > disarms[0]]
+    assert rc != 0
+    assert t_end - disarms[0] < 25  # the command ended on it, not at --duration
+    assert beats_after == []
+    err = capsys.readouterr().err
+    assert "the host stopped reading the link (RuntimeError: injected reader failure)" in err
+    assert "heartbeats stopped, DISARM sent" in err
+    assert "Traceback" not in err
+    del calls
+
+
+def test_session_check_fails_once_the_reader_stopped(monkeypatch):
+    with FakeBoard() as board, Session(board.path) as s:
+        s._reader_died("RuntimeError: x")
+        with pytest.raises(UserError, match="stopped reading the link"):
+            s.check()
+        assert s.disarm_sent
