@@ -1,10 +1,9 @@
-"""Logs: the format (writer API, reader, units, metadata), crash tolerance, Parquet, and 60 s at 1 kHz."""
+"""Logs: CSV that pandas/polars/PlotJuggler open as is, Parquet and MCAP, one read_log, crashes, bad input."""
 
 from __future__ import annotations
 
+import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -14,76 +13,251 @@ from rodgains.params import load_params
 
 from rodctl import paths
 from rodctl.link import protocol as P
-from rodctl.logs.logfile import (JOURNAL_SUFFIX, LogWriter, columns, device_time_s, identify_params, params_of, read_log,
-                            simulator_metadata, telemetry, theta_hat)
+from rodctl.logs import (LogWriter, columns, device_metadata, device_time_s, identify_params, params_of,
+                         read_log, simulator_metadata, theta_hat)
+from rodctl.logs.schema import DeviceClock, from_upright
 
 UNIT_SUFFIXES = ("_s", "_us", "_rad", "_rad_s", "_Nm", "_frac", "_count", "_code", "_name", "_bits", "_text")
+FORMATS = ("csv", "parquet", "mcap")
 
 
-def tlm(k: int, n: int = 5) -> P.Telemetry:
-    return P.Telemetry(mode=P.Mode.BALANCE, reason=P.Reason.NONE, flags=5, n=n, encoder_count=489 + k % 3,
+def tlm(k: int, n: int = 5, mode=P.Mode.BALANCE) -> P.Telemetry:
+    return P.Telemetry(mode=mode, reason=P.Reason.NONE, flags=5, n=n, encoder_count=489 + k % 3,
                        base_rate=np.float32(0.1 * k), torque=np.float32(-0.0123), duty=np.float32(0.25),
                        step_us=42, overruns=0, frames_dropped=0, rx_errors=0,
                        theta_hat=tuple(float(np.float32(math.pi + 0.01 * i + 1e-4 * k)) for i in range(n)),
                        rate_hat=tuple(float(np.float32(0.5 * i - 0.001 * k)) for i in range(n)))
 
 
+def _write(path, frames=300, start_us=0, **kw):
+    w = LogWriter(path, simulator_metadata(load_params(), n=5), **kw)
+    hello = P.Hello(0, 1, 0, 1, 5, P.Mode.DISARMED, P.Reason.NONE, 1000, 1, 0.01, 0.5, 0.5, 0.5, 0.2, bytes(range(32)))
+    w.write_frame(P.decode_frame(P.encode_hello(hello, seq=0, time_us=start_us)), host_time_s=0.0)
+    for k in range(frames):
+        mode = P.Mode.CATCH if k < 100 else P.Mode.BALANCE
+        w.write_telemetry(tlm(k, mode=mode), seq=k + 1, time_us=(start_us + 1000 * (k + 1)) & 0xFFFFFFFF,
+                          host_time_s=0.001 * k + 0.01)
+    w.write_frame(P.decode_frame(P.encode_ack(P.MsgType.ARM, P.AckResult.OK, 77, P.Mode.CATCH, seq=frames + 1,
+                                              time_us=start_us + 1000 * (frames + 1))), host_time_s=0.5)
+    return w
+
+
 def test_every_column_name_carries_its_unit():
-    cols = [c for c, _ in columns(5)]
-    assert "theta_hat_1_rad" in cols and "rate_hat_5_rad_s" in cols and "torque_Nm" in cols
+    cols = [c for c, *_ in columns(5)]
+    assert "theta_hat_1_rad" in cols and "rate_hat_5_rad_s" in cols and "torque_Nm" in cols and cols[0] == "time_s"
     assert all(c.endswith(UNIT_SUFFIXES) for c in cols), [c for c in cols if not c.endswith(UNIT_SUFFIXES)]
 
 
-def test_simulator_writes_the_log_format_from_telemetry_tuples(tmp_path):
-    p = load_params()
-    path = tmp_path / "sim.csv"
-    w = LogWriter(path, simulator_metadata(p))
-    sent = [tlm(k) for k in range(500)]
-    for k, m in enumerate(sent):
-        w.write_telemetry(m, seq=k, time_us=1000 * k)
-    w.close()
+def test_csv_opens_in_pandas_and_polars_with_default_options(tmp_path):
+    import pandas
+    import polars
+
+    path = tmp_path / "run.csv"
+    _write(path).close({"frames": 302})
+    assert path.read_text().splitlines()[0].startswith("time_s,host_time_s,seq_count,")  # the header is line 1
+    df = pandas.read_csv(path)
+    assert len(df) == 300  # one row per telemetry frame: HELLO and ACK are events, not rows
+    for c in ("seq_count", "device_time_us", "mode_code", "reason_code", "flags_bits", "encoder_count",
+              "step_time_us", "overruns_count", "frames_dropped_count", "rx_errors_count"):
+        assert df[c].dtype == np.int64, c  # integer columns stay integer
+    assert df["theta_hat_3_rad"].dtype == np.float64
+    pl = polars.read_csv(path)
+    assert pl.shape == (300, len(columns(5))) and pl["seq_count"].dtype == polars.Int64
+    assert pl["time_s"].is_sorted()
+
+
+def test_time_is_the_device_clock_unwrapped_and_monotonic(tmp_path):
+    path = tmp_path / "wrap.csv"
+    _write(path, start_us=0xFFFFFFFF - 150_000).close()  # the u32 clock wraps 150 frames in
     meta, data = read_log(path)
-    assert len(data) == 500 and meta["rows"] == "500" and meta["incomplete_rows"] == "0"
-    assert meta["source"] == "simulator" and meta["n_edges"] == "5" and meta["params_sha256"] == p.sha256()
-    assert params_of(meta).sha256() == p.sha256()
-    assert np.array_equal(data["seq_count"], np.arange(500))
-    assert device_time_s(data)[-1] == pytest.approx(0.499)
-    # f32 values come back bit for bit
-    th = theta_hat(data)
-    assert np.array_equal(th.astype(np.float32), np.array([m.theta_hat for m in sent], dtype=np.float32))
-    assert np.all(data["torque_Nm"].astype(np.float32) == np.float32(-0.0123))
-    assert np.all(data["mode_name"] == "BALANCE")
+    t = data["time_s"]
+    assert np.all(np.diff(t) > 0) and t[-1] - t[0] == pytest.approx(0.299)
+    assert data["device_time_us"].min() < 1_000_000 < data["device_time_us"].max()  # it did wrap
+    c = DeviceClock()
+    assert [c(x) for x in (5, 3, 10)] == [0.0, 0.0, pytest.approx(7e-6)]  # a step back (reset) holds, then counts on
 
 
-def test_every_frame_type_is_one_row(tmp_path):
-    path = tmp_path / "mixed.csv"
-    w = LogWriter(path, simulator_metadata(load_params()))
-    hello = P.Hello(0, 1, 0, 1, 5, P.Mode.DISARMED, P.Reason.NONE, 1000, 1, 0.01, 0.5, 0.5, 0.5, 0.2, bytes(range(32)))
-    frames = [P.decode_frame(P.encode_hello(hello, seq=0)), P.decode_frame(P.encode_telemetry(tlm(1), seq=1)),
-              P.decode_frame(P.encode_ack(P.MsgType.ARM, P.AckResult.OK, 77, P.Mode.CATCH, seq=2))]
-    for i, f in enumerate(frames):
-        w.write_frame(f, host_time_s=0.001 * i)
+def test_metadata_units_and_events_beside_the_csv(tmp_path):
+    path = tmp_path / "run.csv"
+    _write(path).close({"frames": 302})
+    side = json.loads((tmp_path / "run.csv.json").read_text())
+    assert side["metadata"]["rodctl-log"] == "2" and side["metadata"]["params_sha256"] == load_params().sha256()
+    assert side["columns"]["torque_Nm"]["unit"] == "N m" and side["trailer"]["frames"] == "302"
+    log = read_log(path)
+    ev = log.events
+    assert list(ev["event_name"]) == ["HELLO", "MODE", "MODE", "ACK"]
+    assert list(ev["info_text"][1:3]) == ["start in CATCH", "CATCH -> BALANCE"]
+    assert ev["info_text"][3] == "ACK ARM command_seq 77 OK"
+    assert log.data["time_s"][100] == pytest.approx(ev["time_s"][2])  # events on the telemetry's time axis
+    assert params_of(log.meta).sha256() == load_params().sha256()
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_every_format_reads_back_bit_for_bit(tmp_path, fmt):
+    path = tmp_path / f"run.{fmt}"
+    _write(path).close({"frames": 302})
+    log = read_log(path)
+    meta, data = log
+    assert log.format == fmt and len(data) == 300 and meta["rows"] == "300" and meta["frames"] == "302"
+    assert np.array_equal(data["seq_count"], np.arange(1, 301)) and data["seq_count"].dtype == np.int64
+    assert np.array_equal(theta_hat(data).astype(np.float32),
+                          np.array([tlm(k).theta_hat for k in range(300)], dtype=np.float32))
+    assert device_time_s(data)[-1] == pytest.approx(0.299)
+    assert list(log.events["event_name"]) == ["HELLO", "MODE", "MODE", "ACK"]
+    only = read_log(path, columns=["time_s", "theta_hat_*"]).data
+    assert only.dtype.names == ("time_s", *(f"theta_hat_{i}_rad" for i in range(1, 6)))
+
+
+def test_parquet_has_units_in_its_schema_and_nulls_not_nan(tmp_path):
+    import pandas
+    import pyarrow.parquet as pq
+
+    path = tmp_path / "run.parquet"
+    w = LogWriter(path, simulator_metadata(load_params(), n=5))
+    w.write_telemetry(tlm(0), seq=0, time_us=0)  # host time unknown: a null
     w.close()
-    meta, data = read_log(path)
-    assert list(data["type_name"]) == ["HELLO", "TELEMETRY", "ACK"]
-    assert list(data["mode_name"]) == ["DISARMED", "BALANCE", "CATCH"]
-    assert "ACK ARM command_seq 77 OK" == data["info_text"][2]
-    assert data["info_text"][0].startswith("HELLO fw 0.1.0") and bytes(range(32)).hex() in data["info_text"][0]
-    assert np.isnan(data["torque_Nm"][0]) and np.isnan(data["torque_Nm"][2])
-    assert len(telemetry(data)) == 1
+    t = pq.read_table(path)
+    assert t.schema.field("torque_Nm").metadata[b"unit"] == b"N m"
+    assert t.column("host_time_s").null_count == 1 and t.column("torque_Nm").null_count == 0
+    assert json.loads(t.schema.metadata[b"rodctl"])["n_edges"] == "5"
+    assert pandas.read_parquet(path)["seq_count"].dtype == np.int64
 
 
-def test_a_log_cut_mid_row_keeps_every_complete_row(tmp_path):
+def test_mcap_holds_telemetry_events_and_the_rod_shape(tmp_path):
+    from mcap.reader import make_reader
+
+    path = tmp_path / "run.mcap"
+    _write(path).close()
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        topics: dict[str, list] = {}
+        for schema, channel, message in reader.iter_messages():
+            assert channel.message_encoding == "json" and schema.encoding == "jsonschema"
+            topics.setdefault(channel.topic, []).append(json.loads(message.data))
+        meta = {m.name: m.metadata for m in reader.iter_metadata()}
+    assert len(topics["/telemetry"]) == 300 and topics["/telemetry"][5]["seq_count"] == 6
+    assert [e["event_name"] for e in topics["/events"]] == ["HELLO", "MODE", "MODE", "ACK"]
+    shape = topics["/rod_shape"][0]
+    l = load_params()["rod"]["length"] / 5
+    assert len(shape["x_m"]) == 6 and shape["y_m"][0] == 0.0
+    assert shape["y_m"][-1] == pytest.approx(5 * l, rel=1e-3)  # upright: the tip straight above the axis
+    assert 14 <= len(topics["/rod_shape"]) <= 16  # one every 20 ms of device time over 0.3 s
+    assert meta["rodctl"]["rodctl-log"] == "2" and meta["rodctl_trailer"]["rows"] == "300"
+
+
+def test_a_csv_cut_mid_row_keeps_every_complete_row(tmp_path):
     path = tmp_path / "cut.csv"
-    w = LogWriter(path, simulator_metadata(load_params()))
-    for k in range(100):
-        w.write_telemetry(tlm(k), seq=k, time_us=1000 * k)
+    w = _write(path, frames=100)
     w.flush()  # a killed logger: flushed rows on disk, no trailer
     raw = path.read_bytes()
     path.write_bytes(raw[:-37])  # and, worse than our writer ever leaves it, half a row
     meta, data = read_log(path)
     assert len(data) == 99 and meta["incomplete_rows"] == "1"
-    assert np.array_equal(data["seq_count"], np.arange(99))
+    assert np.array_equal(data["seq_count"], np.arange(1, 100))
+
+
+def test_a_killed_mcap_log_keeps_its_finished_chunks(tmp_path):
+    path = tmp_path / "cut.mcap"
+    w = _write(path, frames=3000)
+    w.flush()
+    w._sink._f.flush()
+    raw = path.read_bytes()  # killed: no summary, no footer, the last chunk not written
+    path.write_bytes(raw[: len(raw) - 100] if len(raw) > 100 else raw)
+    meta, data = read_log(path)
+    assert 1000 <= len(data) <= 3000 and meta["incomplete_rows"] == "1"
+    assert np.array_equal(data["seq_count"], np.arange(1, len(data) + 1))
+
+
+@pytest.mark.parametrize("src,dst", [("csv", "parquet"), ("parquet", "mcap"), ("mcap", "csv")])
+def test_log_convert_between_formats(tmp_path, src, dst):
+    a = tmp_path / f"a.{src}"
+    _write(a).close({"frames": 302})
+    b = tmp_path / f"b.{dst}"
+    r = run_rodctl("log-convert", str(a), "--out", str(b))
+    assert r.returncode == 0, r.stderr
+    la, lb = read_log(a), read_log(b)
+    for c in la.data.dtype.names:
+        if c == "host_time_s":  # host times are kept to the microsecond in CSV
+            assert np.allclose(la.data[c], lb.data[c], rtol=0, atol=5e-7), c
+        elif la.data[c].dtype.kind == "f" and c != "time_s":  # the device's f32 values, bit for bit
+            assert np.array_equal(la.data[c].astype(np.float32), lb.data[c].astype(np.float32), equal_nan=True), c
+        else:
+            assert np.array_equal(la.data[c], lb.data[c]), c
+    assert list(lb.events["event_name"]) == list(la.events["event_name"])
+    r = run_rodctl("log-convert", str(a), "--out", str(b))
+    assert r.returncode == 2 and "exists" in r.stderr and "--force" in r.stderr
+
+
+def _one_line(r) -> str:
+    assert "Traceback" not in r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1, r.stderr
+    return lines[0]
+
+
+def test_bad_logs_are_one_clear_line(tmp_path):
+    (tmp_path / "garbage.parquet").write_bytes(b"PAR1" + bytes(range(200)))
+    (tmp_path / "foreign.parquet").write_bytes(b"not parquet at all")
+    (tmp_path / "foreign.mcap").write_bytes(b"\x89MCAP0\r\n" + bytes(50))
+    good = tmp_path / "good.parquet"
+    _write(good).close()
+    (tmp_path / "cut.parquet").write_bytes(good.read_bytes()[:-200])
+    bad = tmp_path / "badseq.csv"
+    _write(bad).close()
+    lines = bad.read_text().splitlines(keepends=True)
+    cells = lines[5].split(",")
+    cells[2] = "1.5"  # a non-integer sequence number
+    lines[5] = ",".join(cells)
+    bad.write_text("".join(lines))
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    pq.write_table(pa.table({"a": [1, 2]}), tmp_path / "other.parquet")
+    expect = {
+        tmp_path: "is a directory, not a log",
+        tmp_path / "garbage.parquet": "not a readable Parquet file, or cut short",
+        tmp_path / "foreign.parquet": "not a Parquet file",
+        tmp_path / "cut.parquet": "not a readable Parquet file, or cut short",
+        tmp_path / "other.parquet": "a Parquet file, but not a rodctl log",
+        tmp_path / "foreign.mcap": "MCAP",
+        tmp_path / "badseq.csv": "not a readable rodctl log",
+        tmp_path / "missing.csv": "no such log",
+    }
+    for path, text in expect.items():
+        r = run_rodctl("plot", str(path), "--out", str(tmp_path / "x.png"))
+        assert r.stderr.strip(), (path, r.returncode, r.stdout)
+        line = _one_line(r)
+        assert r.returncode == 2 and line.startswith("rodctl: ") and text in line, (path, r.stderr)
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_a_csv_without_its_sidecar_still_plots_with_a_warning(tmp_path):
+    path = tmp_path / "run.csv"
+    _write(path).close()
+    (tmp_path / "run.csv.json").unlink()
+    r = run_rodctl("plot", str(path), "--out", str(tmp_path / "run.png"))
+    assert r.returncode == 0, r.stderr
+    assert "warning: " in r.stderr and "no sidecar run.csv.json" in r.stderr and "Traceback" not in r.stderr
+    assert (tmp_path / "run.png").stat().st_size > 10_000
+
+
+def test_an_existing_log_is_not_replaced_without_force(tmp_path):
+    out = tmp_path / "run.csv"
+    out.write_text("precious\n")
+    r = run_rodctl("log", "--port", "sim://", "--duration", "0.5", "--out", str(out))
+    assert r.returncode == 2 and "run.csv exists: choose another file name, or --force" in _one_line(r)
+    assert out.read_text() == "precious\n"
+    r = run_rodctl("log", "--port", "sim://", "--duration", "0.5", "--out", str(out), "--force")
+    assert r.returncode == 0, r.stderr
+    assert len(read_log(out).data) > 300
+
+
+def test_sim_log_is_not_replaced_without_force(tmp_path):
+    out = tmp_path / "s.csv"
+    out.write_text("precious\n")
+    r = run_rodctl("sim", "--scenario", "balance", "--duration", "0.2", "--no-plot", "--log", str(out))
+    assert r.returncode == 2 and "exists" in _one_line(r)
+    assert out.read_text() == "precious\n"
 
 
 def test_the_device_design_is_identified_by_its_header_hash():
@@ -96,62 +270,27 @@ def test_the_device_design_is_identified_by_its_header_hash():
     assert source == "mine.toml"
 
 
-def test_unknown_design_is_recorded_as_unknown_with_the_hash(tmp_path):
+def test_unknown_design_is_recorded_as_unknown_with_the_hash():
     hello = P.Hello(0, 1, 0, 1, 5, 0, 0, 1000, 1, 0.01, 0.5, 0.5, 0.5, 0.2, b"\x11" * 32)
-    from rodctl.logs.logfile import device_metadata
-
     meta = device_metadata(hello, port="/dev/ttyACM0")
     assert meta["params_source"] == "unknown" and meta["header_sha256"] == "11" * 32
     assert "params_json" not in meta
 
 
-def _has_pyarrow() -> bool:
-    try:
-        import pyarrow  # noqa: F401
-        return True
-    except ImportError:
-        return False
+def test_angles_are_shown_from_the_nearest_upright():
+    deg = np.degrees(from_upright([math.pi, -math.pi, 3 * math.pi + 0.1, math.pi - 0.1, 0.0]))
+    assert np.allclose(deg, [0, 0, math.degrees(0.1), -math.degrees(0.1), -180])
 
 
-@pytest.mark.skipif(not _has_pyarrow(), reason="pyarrow not installed")
-def test_parquet_log_and_its_journal_after_a_kill(tmp_path):
-    path = tmp_path / "run.parquet"
-    w = LogWriter(path, simulator_metadata(load_params()))
-    for k in range(300):
-        w.write_telemetry(tlm(k), seq=k, time_us=1000 * k)
-    w.flush()
-    # killed here: the journal is a complete CSV log, read in place of the missing Parquet
-    journal = tmp_path / ("run.parquet" + JOURNAL_SUFFIX)
-    assert journal.exists() and not path.exists()
-    meta, data = read_log(path)
-    assert len(data) == 300 and meta["recovered_from"] == str(journal)
-    w.close()
-    assert path.exists() and not journal.exists()
-    meta, data = read_log(path)
-    assert len(data) == 300 and meta["rows"] == "300"
-    assert np.array_equal(data["seq_count"], np.arange(300))
-    assert data["theta_hat_3_rad"].astype(np.float32)[7] == np.float32(tlm(7).theta_hat[2])
-
-
-def test_parquet_without_pyarrow_is_one_clear_line(tmp_path):
-    code = ("import sys; sys.modules['pyarrow'] = None\n"
-            "from rodctl import cli\n"
-            f"sys.exit(cli.main(['log', '--port', 'sim://', '--duration', '1', '--out', r'{tmp_path / 'x.parquet'}']))")
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
-    assert r.returncode == 1
-    assert r.stderr.strip().splitlines() == [
-        "rodctl: --format parquet needs pyarrow: pip install pyarrow (or pip install -e '.[parquet]'), "
-        "or log as CSV (--format csv)"]
-
-
-@pytest.mark.skipif(not _has_pyarrow(), reason="pyarrow not installed")
-def test_log_command_writes_parquet(tmp_path):
-    out = tmp_path / "run.parquet"
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_log_command_writes_every_format(tmp_path, fmt):
+    out = tmp_path / f"run.{fmt}"
     r = run_rodctl("log", "--port", "sim://", "--duration", "1.5", "--out", str(out))
     assert r.returncode == 0, r.stderr
-    meta, data = read_log(out)
-    assert meta["rows"] == meta["frames"] == str(len(data))
-    assert 1400 <= len(telemetry(data)) <= 1600
+    log = read_log(out)
+    assert 1400 <= len(log.data) <= 1800 and int(log.meta["rows"]) == len(log.data)
+    assert log.meta["seq_gaps"] == "0" and "HELLO" in set(log.events["event_name"])
+    assert np.all(np.diff(log.data["time_s"]) > 0)
 
 
 def test_log_60_seconds_at_1khz_loses_no_frame(tmp_path):
@@ -159,20 +298,40 @@ def test_log_60_seconds_at_1khz_loses_no_frame(tmp_path):
     out = tmp_path / "long.csv"
     r = run_rodctl("log", "--port", "sim://", "--duration", "60", "--arm", "balance", "--out", str(out), timeout=180)
     assert r.returncode == 0, r.stderr
-    meta, data = read_log(out)
-    tl = telemetry(data)
-    seq = data["seq_count"]
-    print(f"\n60 s log: {len(data)} frames ({len(tl)} telemetry), seq gaps {meta['seq_gaps']}, "
-          f"device dropped {meta['device_frames_dropped']}, CRC errors {meta['crc_errors']}")
+    log = read_log(out)
+    meta, tl = log
+    seq = tl["seq_count"]
     assert meta["incomplete_rows"] == "0"
-    assert int(meta["frames"]) == len(data) == int(meta["rows"])  # row count == frame count
-    assert np.array_equal(seq, np.arange(seq[0], seq[0] + len(seq)))  # contiguous: nothing lost anywhere
+    # every frame is a telemetry row or an event (heartbeat ACKs are counted only)
     assert meta["seq_gaps"] == "0" and meta["crc_errors"] == "0" and meta["decode_errors"] == "0"
-    assert meta["device_frames_dropped"] == "0" and np.nanmax(tl["frames_dropped_count"]) == 0
+    assert meta["device_frames_dropped"] == "0" and np.max(tl["frames_dropped_count"]) == 0
+    assert np.all(np.diff(seq) >= 1) and int(meta["rows"]) == len(tl)
+    frame_events = np.count_nonzero(np.isin(log.events["event_name"], ["HELLO", "ACK"]))
+    assert int(meta["frames"]) == len(tl) + frame_events + int(meta["heartbeat_acks"])  # every frame accounted for
     assert 59_000 <= len(tl) <= 61_000
-    span = device_time_s(tl)[-1]
-    assert 59.0 <= span <= 61.0
-    # the heartbeat held the board armed for the whole minute, and leaving disarmed it
+    assert 59.0 <= tl["time_s"][-1] - tl["time_s"][0] <= 61.0
     armed = tl[tl["mode_name"] == "CATCH"]
     assert len(armed) >= 59_000 and not np.any(tl["mode_name"] == "FAULT")
     assert tl["mode_name"][-1] == "DISARMED" and tl["reason_name"][-1] == "HOST"
+
+
+def test_plot_snapshots_are_taken_at_events():
+    from rodctl.logs.plots import events_of
+
+    t = np.arange(3000) * 1e-3
+    mode = np.where(t < 1.0, P.Mode.SWING_UP, P.Mode.BALANCE)
+    dev = np.where(t < 1.0, 0.5, 0.3 * np.exp(-(t - 1.0) / 0.1))  # caught at 17 deg, within 2 deg from 1.2151 s on
+    th = np.column_stack([math.pi + dev] * 3)
+    ev = dict(events_of(mode, th, t))
+    assert ev == {"start": 0, "catch": 1000, "settle": 1216, "end": 2999}
+
+
+def test_a_killed_parquet_log_is_named_not_misread(tmp_path):
+    from rodgains.errors import InputError
+
+    path = tmp_path / "run.parquet"
+    w = _write(path, frames=100)
+    w.flush()  # killed before close: no footer yet, and the name says so
+    assert not path.exists() and (tmp_path / "run.parquet.partial").exists()
+    with pytest.raises(InputError, match="run.parquet.partial is an unfinished Parquet log"):
+        read_log(path)

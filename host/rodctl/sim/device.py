@@ -92,21 +92,39 @@ class VirtualDevice:
     Not thread-safe: one thread (the runner) makes every call.
     """
 
-    def __init__(self, params=None, *, plant: str = "inextensible", edges: int | None = None,
-                 params_path: str | None = None, tx_capacity: int = 0):
+    def __init__(self, params=None, *, plant: str | None = None, edges: int | None = None,
+                 params_path: str | None = None, tx_capacity: int = 0, overrides=(), theta0_deg: float = 0.0,
+                 plant_params=None):
         from rodgains.params import load_params
 
         from rodctl.build.sil_build import build_sil
-        from rodctl.sim.plant import Plant
+        from rodctl.sim.plant import faithful_plant
 
-        if plant not in PLANT_KINDS:
-            from rodgains.errors import UserError
+        if plant is not None and plant not in PLANT_KINDS and plant_params is None:
+            from rodgains.errors import InputError
 
-            raise UserError(f"unknown plant {plant!r}: choose one of {', '.join(PLANT_KINDS)}")
-        self.params = params if params is not None else load_params(params_path)
+            raise InputError(f"unknown plant {plant!r}: choose one of {', '.join(PLANT_KINDS)}")
+        # The same parameters build the firmware and the plant: `--params/--set` describe this rod.
+        self.params = params if params is not None else load_params(params_path, list(overrides))
+        # plant= and edges= are shorthands for the [plant] table, as `rodctl sim --plant/--edges` are.
+        shorthand = ([f"plant.model={plant}"] if plant else []) + ([f"plant.edges={edges}"] if edges else [])
         self.params_path = params_path
+        self.overrides = list(overrides)
+        self.theta0_deg = float(theta0_deg)
         self.lib_path = build_sil(self.params)
-        self.plant = Plant(self.params, kind=plant, edges=edges or self.params.N, input_mode="duty")
+        # plant_params (sim://?plant=FILE.toml): the rod the board really drives, which the firmware's
+        # parameters only estimate (what `rodctl identify` must recover). Its [plant] table is the model.
+        self.plant_params = plant_params
+        if plant_params is not None:
+            self.plant = faithful_plant(plant_params, input_mode="duty")
+            plant = f"{plant_params['plant']['model']} from {plant_params.source}"
+        else:
+            # The board drives the faithful rod of the parameter file, never the controller's own model.
+            rod = self.params.with_overrides(*shorthand) if shorthand else self.params
+            self.plant = faithful_plant(rod, input_mode="duty")
+            plant = rod["plant"]["model"]
+        if self.theta0_deg:
+            self.plant.set_state(math.radians(self.theta0_deg))
         self.kind = plant
         self.lib = _take_library(self.lib_path)
         self.period = float(self.lib.rod_sil_period())
@@ -120,8 +138,19 @@ class VirtualDevice:
 
     @classmethod
     def from_options(cls, *, plant: str | None = None, edges: int | str | None = None,
-                     params: str | None = None) -> "VirtualDevice":
+                     params: str | None = None, set=(), theta0_deg: float | str | None = None) -> "VirtualDevice":
+        """A board from sim:// URL options (strings): plant, edges, params (file), set (list of
+        section.key=value overrides), theta0_deg (every edge's angle at power-on, 0 hanging, 180 upright)."""
         from rodgains.errors import UserError
+
+        if isinstance(set, str):
+            set = [set]
+        try:
+            theta0 = float(theta0_deg) if theta0_deg not in (None, "") else 0.0
+        except ValueError:
+            raise UserError(f"theta0_deg must be a number [deg], got {theta0_deg!r}") from None
+        if not math.isfinite(theta0) or abs(theta0) > 360:
+            raise UserError(f"theta0_deg must be within -360..360 deg, got {theta0_deg!r}")
 
         if edges is not None:
             try:
@@ -130,7 +159,13 @@ class VirtualDevice:
                 raise UserError(f"edges must be an integer, got {edges!r}") from None
             if not 2 <= edges <= 64:
                 raise UserError(f"edges must be 2..64, got {edges}")
-        return cls(plant=plant or "inextensible", edges=edges, params_path=params)
+        plant_params = None
+        if plant is not None and plant.endswith(".toml"):
+            from rodgains.params import load_params
+
+            plant_params, plant = load_params(plant), None
+        return cls(plant=plant or None, edges=edges, params_path=params, overrides=list(set),
+                   theta0_deg=theta0, plant_params=plant_params)
 
     # --- one thread drives all of these ----------------------------------------------------
     @property
@@ -171,8 +206,10 @@ class VirtualDevice:
             _give_back(self.lib)
 
     def describe(self) -> str:
-        return (f"firmware N={self.edges} at {1 / self.period:g} Hz (parameters {self.params.sha256()[:16]}), "
-                f"plant {self.kind} with {self.plant.N} edges, duty input, hanging at rest")
+        start = "hanging at rest" if not self.theta0_deg else f"at rest at {self.theta0_deg:g} deg"
+        over = f" with --set {' '.join(self.overrides)}" if self.overrides else ""
+        return (f"firmware N={self.edges} at {1 / self.period:g} Hz (parameters {self.params.sha256()[:16]}{over}), "
+                f"plant {self.kind} with {self.plant.N} edges, duty input, {start}")
 
 
 class RealTimeRunner:

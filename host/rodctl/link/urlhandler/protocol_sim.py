@@ -7,10 +7,15 @@
 Opening the port powers the virtual board on (rodctl.sim.device: the firmware's host build, the
 rod_dev_* path with the real protocol, against the simulated rod hanging at rest) and starts it
 in real time; closing powers it off. Options in the query:
-    plant=inextensible|der   simulated rod model (default inextensible)
-    edges=N                  plant edges (default: the parameters' N)
+    plant=inextensible|der   simulated rod model (default: the parameters' [plant] model)
+    plant=HIDDEN.toml        the rod the board drives comes from this parameter file (its [plant] table,
+                             motor, friction), while the firmware is built from params= (system
+                             identification: the host is not told the plant)
+    edges=N                  plant edges (default: the parameters' plant.edges)
     params=PATH              parameter file for both the firmware build and the plant (default
                              gains/rodgains/default.toml)
+    set=SECTION.KEY=VALUE    override one parameter of both (repeatable; `--set` of device commands)
+    theta0_deg=DEG           every edge's angle at power-on (0 hanging, 180 upright; default 0)
 Writes go to the board's RX buffer, reads return what its USB would send. Baud rate and line
 settings are accepted and ignored, as by the Teensy's USB serial.
 """
@@ -23,7 +28,8 @@ import urllib.parse as urlparse
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
 
-OPTIONS = ("plant", "edges", "params")
+OPTIONS = ("plant", "edges", "params", "set", "theta0_deg")
+REPEATABLE = ("set",)
 
 
 def parse_url(url: str) -> dict[str, str]:
@@ -37,7 +43,7 @@ def parse_url(url: str) -> dict[str, str]:
     for key, values in urlparse.parse_qs(parts.query, keep_blank_values=True).items():
         if key not in OPTIONS:
             raise SerialException(f"unknown sim:// option {key!r}: options are {', '.join(OPTIONS)}")
-        opts[key] = values[-1]
+        opts[key] = values if key in REPEATABLE else values[-1]
     return opts
 
 

@@ -1,0 +1,211 @@
+"""What every device command shares: --port/--params/--set, opening a session, the status line, signals."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import datetime as _dt
+import signal
+import sys
+import threading
+import time
+import urllib.parse as urlparse
+from pathlib import Path
+
+from rodctl.link import protocol as P
+from rodctl.link.session import Session, is_tty, name_of, parse_assignment, reason_text
+from rodctl.logs.schema import from_upright_deg
+
+
+PORT_HELP = ("serial port (e.g. /dev/ttyACM0), any pyserial URL, or sim:// for the simulated rod "
+             "(sim://?plant=der&edges=20&params=FILE); default: the one Teensy on USB (16C0:0483)")
+
+
+ARM_CHOICES = {"swing-up": P.ArmMode.SWING_UP, "balance": P.ArmMode.BALANCE}
+
+
+def add_port_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--port", metavar="PORT", help=PORT_HELP)
+
+
+def add_design_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--params", metavar="FILE",
+                   help="parameter file the firmware may have been built from (identifies the design by its hash); "
+                        "with --port sim:// it also builds the virtual board's firmware and plant")
+    p.add_argument("--set", metavar="SECTION.KEY=VALUE", action="append", default=[], dest="overrides",
+                   help="override one parameter of --params (repeatable)")
+
+
+def design_params(session: Session, args=None):
+    """(Params, source) the firmware's gains came from, matched by the HELLO's header hash."""
+    from rodctl.logs.metadata import identify_params, shown
+
+    cands = []
+    if args is not None and (getattr(args, "params", None) or getattr(args, "overrides", None)):
+        from rodgains.params import load_params
+
+        label = args.params or "defaults"
+        if args.overrides:
+            label += " with " + " ".join(f"--set {o}" for o in args.overrides)
+        cands.append((load_params(args.params, args.overrides), label))
+    dev = getattr(session.ser, "device", None)  # sim://: the virtual board knows its parameters
+    if dev is not None and getattr(dev, "params", None) is not None:
+        from rodgains.params import DEFAULT_PARAMS
+
+        over = "".join(f" --set {o}" for o in getattr(dev, "overrides", ()))
+        cands.append((dev.params, f"{shown(dev.params_path or DEFAULT_PARAMS)}{over} (sim://)"))
+    return identify_params(bytes(session.hello.header_sha256).hex(), cands)
+
+
+class StatusLine:
+    """One live line on stderr (~4 updates/s on a terminal; a plain line per second otherwise)."""
+
+    def __init__(self, stream=None, tty: bool | None = None):
+        self.stream = stream or sys.stderr
+        self.tty = is_tty(self.stream) if tty is None else tty
+        self.interval = 0.25 if self.tty else 1.0
+        self._last = 0.0
+        self._shown = False
+
+    def due(self) -> bool:
+        return time.monotonic() - self._last >= self.interval
+
+    def update(self, text: str, force: bool = False) -> None:
+        if not force and not self.due():
+            return
+        self._last = time.monotonic()
+        try:
+            if self.tty:
+                self.stream.write("\r\x1b[K" + text)
+                self._shown = True
+            else:
+                self.stream.write(text + "\n")
+            self.stream.flush()
+        except (OSError, ValueError):
+            pass
+
+    def end(self) -> None:
+        if self.tty and self._shown:
+            try:
+                self.stream.write("\n")
+                self.stream.flush()
+            except (OSError, ValueError):
+                pass
+            self._shown = False
+
+
+class RateMeter:
+    """Frames per second over the last second or so."""
+
+    def __init__(self, frames: int = 0):
+        self._hist: list[tuple[float, int]] = [(time.monotonic(), frames)]
+
+    def rate(self, frames: int) -> float:
+        now = time.monotonic()
+        self._hist.append((now, frames))
+        while len(self._hist) > 2 and now - self._hist[0][0] > 1.0:
+            self._hist.pop(0)
+        t0, f0 = self._hist[0]
+        return (frames - f0) / (now - t0) if now > t0 else 0.0
+
+
+def mode_text(mode, reason) -> str:
+    m = name_of(P.Mode, mode)
+    if int(mode) == P.Mode.FAULT:
+        return f"{m} ({reason_text(reason)}: run clear-fault)"
+    if int(reason) != P.Reason.NONE:
+        return f"{m} (last: {reason_text(reason)})"
+    return m
+
+
+def status_text(s: Session, fps: float, rows: int | None = None) -> str:
+    c = s.counters()
+    t = s.telemetry
+    parts = [f"{s.elapsed():6.1f} s", f"{fps:6.0f} frames/s", f"CRC errors {c['crc_errors']}",
+             f"seq gaps {c['seq_gaps']}", f"device dropped {c['device_dropped']}"]
+    if t is not None:
+        parts.append(f"mode {mode_text(t.mode, t.reason)}")
+        if t.n:
+            parts.append(f"theta1 {from_upright_deg(t.theta_hat[0]):+7.1f} deg from upright")
+    if rows is not None:
+        parts.append(f"{rows} rows")
+    return " | ".join(parts)
+
+
+@contextlib.contextmanager
+def stop_signals():
+    """SIGTERM and SIGHUP stop like Ctrl-C (KeyboardInterrupt in the main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def raise_interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    old = {}
+    for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
+        if sig is not None:
+            old[sig] = signal.signal(sig, raise_interrupt)
+    try:
+        yield
+    finally:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+
+
+@contextlib.contextmanager
+def no_interrupts():
+    """Let cleanup finish: a second Ctrl-C (or SIGTERM) waits until the block is done."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    got = []
+    handlers = {}
+    for sig in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)):
+        if sig is not None:
+            handlers[sig] = signal.signal(sig, lambda s, f: got.append(s))
+    try:
+        yield
+    finally:
+        for sig, h in handlers.items():
+            signal.signal(sig, h)
+
+
+def open_session(args) -> Session:
+    return session_for(args)
+
+
+def default_log_name(fmt: str) -> str:
+    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    return f"rod-{stamp}.{fmt if fmt in ('parquet', 'mcap') else 'csv'}"
+
+
+def apply_settings(s: Session, assignments: list[str], args=None, out=print) -> None:
+    parsed = [parse_assignment(a) for a in assignments]  # all names and numbers checked before anything is sent
+    params, _ = design_params(s, args)  # for the catch angle's range (the balance angle limit)
+    now = s.set_all(parsed, design_params=params)  # every value range-checked, then all applied or none
+    for setting, value in parsed:
+        out(f"{setting.name} = {setting.format(now[setting.name])} (until the board resets)")
+
+
+def device_port(args) -> str | None:
+    """--port, with --params/--set passed on to a sim:// board (its firmware build and its plant)."""
+    port = getattr(args, "port", None)
+    params = getattr(args, "params", None)
+    overrides = list(getattr(args, "overrides", None) or [])
+    if not port or not port.startswith("sim://") or not (params or overrides):
+        return port
+    from rodgains.params import load_params
+
+    load_params(params, overrides)  # a bad file or --set is one clear line before the board starts
+    parts = urlparse.urlsplit(port)
+    query = urlparse.parse_qsl(parts.query, keep_blank_values=True)
+    if params and not any(k == "params" for k, _ in query):
+        query.append(("params", str(Path(params).resolve())))
+    query += [("set", o) for o in overrides]
+    return "sim://?" + urlparse.urlencode(query)
+
+
+def session_for(args, **kw) -> Session:
+    """A Session on the command's port (not yet open; use it as a context manager)."""
+    return Session(device_port(args), **kw)

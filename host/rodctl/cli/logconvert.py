@@ -1,0 +1,29 @@
+"""rodctl log-convert: any log (CSV, Parquet, MCAP) to any other format."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def run_log_convert(args) -> int:
+    from rodctl.logs.reader import convert_log
+    from rodctl.logs.writer import log_format
+
+    src = Path(args.log)
+    fmt = args.format or (log_format(args.out) if args.out else "parquet")
+    out = Path(args.out) if args.out else src.with_suffix("." + fmt)
+    convert_log(src, out, fmt=fmt, overwrite=args.force)
+    print(f"wrote {out}")
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser("log-convert", help="convert a log between CSV, Parquet and MCAP",
+                       description="Read a log in any format (CSV with its sidecar, Parquet, MCAP) and write it in "
+                                   "another: every telemetry row, the events and the metadata.")
+    p.add_argument("log", metavar="LOG")
+    p.add_argument("--out", metavar="PATH", help="the new log (default: LOG with the format's extension)")
+    p.add_argument("--format", choices=("csv", "parquet", "mcap"),
+                   help="format (default: from --out's extension, else parquet)")
+    p.add_argument("--force", action="store_true", help="replace an existing --out")
+    p.set_defaults(func=run_log_convert)

@@ -1,0 +1,123 @@
+"""One-shot device commands: status, disarm, clear-fault, set."""
+
+from __future__ import annotations
+
+import json
+
+from rodctl.cli.common import add_design_args, add_port_arg, apply_settings, design_params, session_for, stop_signals
+from rodctl.link import protocol as P
+from rodctl.link.session import SETTINGS, Session, hello_settings, name_of, parse_assignment, reason_text
+from rodctl.logs.schema import from_upright_deg
+
+
+def status_report(session: Session, args=None) -> dict:
+    h = session.hello
+    t = session.wait_telemetry(timeout=2.0)
+    params, source = design_params(session, args)
+    return {
+        "port": session.port,
+        "firmware_version": f"{h.fw_major}.{h.fw_minor}.{h.fw_patch}",
+        "gains_schema": h.gains_schema,
+        "protocol_version": P.VERSION,
+        "header_sha256": bytes(h.header_sha256).hex(),
+        "params_source": source if params is not None else "unknown",
+        "n": h.n,
+        "rate_hz": 1e6 / h.period_us,
+        "decimation": h.decimation,
+        "settings": hello_settings(h),
+        "torque_max_Nm": h.torque_max,
+        "mode": name_of(P.Mode, t.mode),
+        "reason": name_of(P.Reason, t.reason),
+        "flags": [f.name for f in P.TelemetryFlag if int(t.flags) & int(f)],
+        "encoder_count": t.encoder_count,
+        "theta_hat_rad": list(t.theta_hat),
+        "rate_hat_rad_s": list(t.rate_hat),
+        "base_rate_rad_s": t.base_rate,
+        "torque_Nm": t.torque,
+        "duty": t.duty,
+        "overruns": t.overruns,
+        "frames_dropped": t.frames_dropped,
+        "rx_errors": t.rx_errors,
+    }
+
+
+def run_status(args) -> int:
+    with stop_signals(), session_for(args) as s:
+        r = status_report(s, args)
+    if args.json:
+        print(json.dumps(r, indent=1))
+        return 0
+    st = r["settings"]
+    mode = r["mode"] + (f" ({reason_text(P.Reason[r['reason']])})" if r["reason"] != "NONE" else "")
+    if r["mode"] == "FAULT":
+        mode += ": run `rodctl clear-fault`"
+    print(f"port        {r['port']}")
+    print(f"firmware    {r['firmware_version']} (gains schema {r['gains_schema']}), protocol v{r['protocol_version']}")
+    print(f"gains       N={r['n']} at {r['rate_hz']:g} Hz, header sha256 {r['header_sha256'][:16]}..., "
+          f"parameters {r['params_source']}")
+    print(f"mode        {mode}; flags {', '.join(r['flags']) or 'none'}")
+    print(f"settings    swing_amplitude {st['swing_amplitude']:.4g} N m, swing_angle_deg {st['swing_angle_deg']:.4g}, "
+          f"catch_angle_deg {st['catch_angle_deg']:.4g}, telemetry_decimation {st['telemetry_decimation']:g}, "
+          f"heartbeat_timeout {st['heartbeat_timeout']:.3g} s (torque max {r['torque_max_Nm']:.3g} N m)")
+    th = ", ".join(f"{from_upright_deg(x):+.1f}" for x in r["theta_hat_rad"])
+    print(f"telemetry   encoder {r['encoder_count']} counts, theta_hat [{th}] deg from upright, base rate "
+          f"{r['base_rate_rad_s']:.3g} rad/s, torque {r['torque_Nm']:.3g} N m, duty {r['duty']:.3g}")
+    print(f"counters    overruns {r['overruns']}, frames dropped {r['frames_dropped']}, rx errors {r['rx_errors']}")
+    return 0
+
+
+def run_disarm(args) -> int:
+    with stop_signals(), session_for(args, disarm_on_close=False) as s:
+        ack = s.disarm()
+        if ack.mode == P.Mode.FAULT:
+            print(f"device is in FAULT ({reason_text(s.current_reason())}), driver off; "
+                  "run `rodctl clear-fault` to return to DISARMED")
+        else:
+            print(f"disarmed: mode {name_of(P.Mode, ack.mode)}")
+    return 0
+
+
+def run_clear_fault(args) -> int:
+    with stop_signals(), session_for(args) as s:
+        before = s.wait_telemetry(timeout=2.0)
+        ack = s.clear_fault()
+        if before.mode == P.Mode.FAULT:
+            print(f"fault cleared ({reason_text(before.reason)}): mode {name_of(P.Mode, ack.mode)}")
+        else:
+            print(f"no fault to clear: mode {name_of(P.Mode, ack.mode)}")
+    return 0
+
+
+def run_set(args) -> int:
+    for a in args.assignments:
+        parse_assignment(a)
+    with stop_signals(), session_for(args) as s:
+        apply_settings(s, args.assignments, args)
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser("status", help="firmware identity, settings and one telemetry frame",
+                       description="Connect, print the HELLO (firmware version, header hash, N, rate, settings) "
+                                   "and one telemetry frame, then disarm and disconnect.")
+    add_port_arg(p)
+    add_design_args(p)
+    p.add_argument("--json", action="store_true", help="print as JSON")
+    p.set_defaults(func=run_status)
+
+    p = sub.add_parser("disarm", help="turn the motor driver off (DISARMED, reason HOST)")
+    add_port_arg(p)
+    p.set_defaults(func=run_disarm)
+
+    p = sub.add_parser("clear-fault", help="leave FAULT for DISARMED")
+    add_port_arg(p)
+    p.set_defaults(func=run_clear_fault)
+
+    names = ", ".join(f"{s.name} [{s.unit or 'integer'}]" for s in SETTINGS.values())
+    p = sub.add_parser("set", help="change run-time settings (swing amplitude/angle, catch angle, ...)",
+                       description=f"Change run-time settings on the board until it resets. Names: {names}. "
+                                   "The board checks the bounds; a refused value is reported with its range.")
+    p.add_argument("assignments", nargs="+", metavar="NAME=VALUE")
+    add_port_arg(p)
+    add_design_args(p)
+    p.set_defaults(func=run_set)

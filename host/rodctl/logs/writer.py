@@ -1,0 +1,237 @@
+"""LogWriter: writes a log as frames arrive (a Session listener), in CSV, Parquet or MCAP.
+
+    w = LogWriter("run.csv", device_metadata(hello, port=...), n=hello.n)   # fmt from the extension
+    session.add_listener(w)          # or w.write_telemetry(P.Telemetry(...), seq, time_us) (simulator)
+    w.close({"frames": 1234})        # the trailer: counters of the session
+
+One row per TELEMETRY frame (schema.columns); HELLO and ACK frames, mode changes and notes go to
+the events. time_s is the device clock unwrapped (schema.DeviceClock). An existing log is never
+replaced unless overwrite=True (`--force`).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+from rodgains.errors import InputError, UserError
+
+from rodctl.link import protocol as P
+from rodctl.logs import schema
+from rodctl.logs.metadata import utc_now
+
+FORMATS = ("csv", "parquet", "mcap")
+FLUSH_INTERVAL_S = {"csv": 0.25, "parquet": 5.0, "mcap": 0.25}
+_NAN = float("nan")
+
+
+def log_format(path: str | Path, fmt: str | None = None) -> str:
+    """The format of a log path: fmt when given, else from the extension (.parquet, .mcap; else csv)."""
+    if fmt:
+        if fmt not in FORMATS:
+            raise InputError(f"unknown log format {fmt!r}: {', '.join(FORMATS)}")
+        return fmt
+    s = str(path).lower()
+    return "parquet" if s.endswith(".parquet") else "mcap" if s.endswith(".mcap") else "csv"
+
+
+def require_format(fmt: str) -> None:
+    """UserError when the library a format needs is missing."""
+    lib = {"parquet": "pyarrow", "mcap": "mcap"}.get(fmt)
+    if lib is None:
+        return
+    try:
+        __import__(lib)
+    except ImportError:
+        raise UserError(f"--format {fmt} needs {lib}: pip install {lib}, or log as CSV (--format csv)") from None
+
+
+def require_pyarrow() -> None:
+    require_format("parquet")
+
+
+def files_of(path: str | Path, fmt: str | None = None) -> list[Path]:
+    """Every file a log at `path` writes (a CSV log has a sidecar and an events file)."""
+    from rodctl.logs import csvlog
+
+    path = Path(path)
+    if log_format(path, fmt) == "csv":
+        return [path, csvlog.sidecar_path(path), csvlog.events_path(path)]
+    return [path]
+
+
+def check_new(path: str | Path, fmt: str | None = None, overwrite: bool = False) -> None:
+    """UserError when the log would replace an existing file and overwrite is not set (before any work)."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path} is a directory; name a log file")
+    if not overwrite:
+        for f in files_of(path, fmt):
+            if f.exists():
+                raise InputError(f"{f} exists: choose another file name, or --force to replace it")
+
+
+_MODE_NAMES = {int(m): m.name for m in P.Mode}
+_REASON_NAMES = {int(r): r.name for r in P.Reason}
+
+
+def _name(table, v) -> str:
+    v = int(v)
+    return table.get(v, str(v))
+
+
+class LogWriter:
+    """Writes a log as frames arrive (thread-safe); see the module doc.
+
+    path: the log. metadata: device_metadata(...) or simulator_metadata(...). n: edges (default
+    metadata n_edges). fmt: "csv" | "parquet" | "mcap" (default from the extension).
+    """
+
+    def __init__(self, path: str | Path, metadata: dict, *, n: int | None = None, fmt: str | None = None,
+                 flush_interval: float | None = None, overwrite: bool = False):
+        from rodctl.logs import csvlog, mcaplog, parquetlog
+
+        self.path = Path(path)
+        self.format = log_format(path, fmt)
+        require_format(self.format)
+        check_new(self.path, self.format, overwrite)
+        self.metadata = dict(metadata)
+        self.n = int(n if n is not None else metadata.get("n_edges", 0))
+        self.flush_interval = FLUSH_INTERVAL_S[self.format] if flush_interval is None else flush_interval
+        self.rows = 0  # telemetry rows
+        self.events = 0
+        self.heartbeat_acks = 0  # OK acks of heartbeats: counted in the trailer, not written as events
+        self.clock = schema.DeviceClock()
+        self._last_mode: tuple[int, int] | None = None
+        self._buf: list[tuple] = []
+        self._ebuf: list[tuple] = []
+        self._lock = threading.Lock()
+        self._last_flush = time.monotonic()
+        self._pad = (_NAN,) * self.n
+        sink = {"csv": csvlog.CsvSink, "parquet": parquetlog.ParquetSink, "mcap": mcaplog.McapSink}[self.format]
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._sink = sink(self.path, self.metadata, self.n)
+        except OSError as e:
+            raise InputError(f"cannot write {self.path}: {e.strerror or e}") from None
+        self.closed = False
+
+    @property
+    def telemetry_rows(self) -> int:
+        return self.rows
+
+    # --- rows -------------------------------------------------------------------------------
+    def _added(self) -> None:
+        if time.monotonic() - self._last_flush >= self.flush_interval or len(self._buf) >= 20000:
+            self._flush_locked()
+
+    def write_telemetry(self, msg, seq: int, time_us: int, host_time_s: float = _NAN) -> None:
+        """One telemetry row from a protocol.Telemetry tuple (also the simulator's entry point)."""
+        n = self.n
+        th, rt = tuple(msg.theta_hat[:n]), tuple(msg.rate_hat[:n])
+        if len(th) < n:
+            th, rt = (th + self._pad)[:n], (rt + self._pad)[:n]
+        mode, reason = int(msg.mode), int(msg.reason)
+        with self._lock:
+            t = self.clock(time_us)
+            row = (t, float(host_time_s), int(seq), int(time_us), mode, _name(_MODE_NAMES, mode), reason,
+                   _name(_REASON_NAMES, reason), int(msg.flags), int(msg.encoder_count), float(msg.base_rate),
+                   float(msg.torque), float(msg.duty), int(msg.step_us), int(msg.overruns),
+                   int(msg.frames_dropped), int(msg.rx_errors)) + th + rt
+            self._buf.append(row)
+            self.rows += 1
+            if (mode, reason) != self._last_mode:
+                what = ("start in " if self._last_mode is None else f"{_name(_MODE_NAMES, self._last_mode[0])} -> ")
+                self._event_locked(t, host_time_s, seq, "MODE", mode, reason,
+                                   what + _name(_MODE_NAMES, mode) + (f" ({_name(_REASON_NAMES, reason)})"
+                                                                      if reason else ""))
+                self._last_mode = (mode, reason)
+            self._added()
+
+    def _event_locked(self, t, host_time_s, seq, kind, mode, reason, info) -> None:
+        self._ebuf.append((t, float(host_time_s), int(seq), kind, int(mode), _name(_MODE_NAMES, mode),
+                           -1 if reason is None else int(reason),
+                           "" if reason is None else _name(_REASON_NAMES, reason), info))
+        self.events += 1
+
+    def _event(self, time_us, host_time_s, seq, kind, mode, reason, info) -> None:
+        with self._lock:
+            t = self.clock(time_us) if time_us is not None else self.clock.us / 1e6
+            self._event_locked(t, host_time_s, seq, kind, mode, reason, info)
+            self._added()
+
+    def write_hello(self, msg, seq: int, time_us: int, host_time_s: float = _NAN) -> None:
+        info = (f"HELLO fw {msg.fw_major}.{msg.fw_minor}.{msg.fw_patch} schema {msg.gains_schema} n {msg.n} "
+                f"period_us {msg.period_us} decimation {msg.decimation} swing_amplitude_Nm {msg.swing_amplitude:.6g} "
+                f"swing_angle_rad {msg.swing_angle:.6g} catch_angle_rad {msg.catch_angle:.6g} "
+                f"heartbeat_timeout_s {msg.heartbeat_timeout:.6g} torque_max_Nm {msg.torque_max:.6g} "
+                f"header_sha256 {bytes(msg.header_sha256).hex()}")
+        self._event(time_us, host_time_s, seq, "HELLO", msg.mode, msg.reason, info)
+
+    def write_ack(self, msg, seq: int, time_us: int, host_time_s: float = _NAN) -> None:
+        if msg.command == P.MsgType.HEARTBEAT and msg.result == P.AckResult.OK:
+            with self._lock:  # ten a second, and they say nothing: counted, the clock moves
+                self.clock(time_us)
+                self.heartbeat_acks += 1
+            return
+        info = f"ACK {_name({int(t): t.name for t in P.MsgType}, msg.command)} command_seq {msg.command_seq} " \
+               f"{_name({int(r): r.name for r in P.AckResult}, msg.result)}"
+        self._event(time_us, host_time_s, seq, "ACK", msg.mode, None, info)
+
+    def note(self, text: str, host_time_s: float = _NAN) -> None:
+        """A host event (e.g. "recording started"), at the device time of the latest frame."""
+        mode, reason = self._last_mode or (0, 0)
+        self._event(None, host_time_s, -1, "NOTE", mode, reason, text)
+
+    def write_frame(self, frame, host_time_s: float = _NAN) -> None:
+        """One decoded frame (protocol.Frame): a telemetry row or an event."""
+        t = frame.type
+        if t == P.MsgType.TELEMETRY:
+            self.write_telemetry(frame.msg, frame.seq, frame.time_us, host_time_s)
+        elif t == P.MsgType.HELLO:
+            self.write_hello(frame.msg, frame.seq, frame.time_us, host_time_s)
+        elif t == P.MsgType.ACK:
+            self.write_ack(frame.msg, frame.seq, frame.time_us, host_time_s)
+        else:  # a host->device type from a device: still recorded
+            self._event(frame.time_us, host_time_s, frame.seq, "NOTE", 0, None, f"unexpected {t!r}: {frame.msg!r}")
+
+    __call__ = write_frame  # a Session listener: fn(frame, host_time_s)
+
+    # --- file -------------------------------------------------------------------------------
+    def _flush_locked(self) -> None:
+        try:
+            if self._buf:
+                rows, self._buf = self._buf, []
+                self._sink.write_rows(rows)
+            if self._ebuf:
+                ev, self._ebuf = self._ebuf, []
+                self._sink.write_events(ev)
+        except OSError as e:
+            raise InputError(f"writing {self.path} failed: {e.strerror or e}") from None
+        self._last_flush = time.monotonic()
+
+    def flush(self) -> None:
+        with self._lock:
+            if not self.closed:
+                self._flush_locked()
+
+    def maybe_flush(self) -> None:
+        if time.monotonic() - self._last_flush >= self.flush_interval:
+            self.flush()
+
+    def close(self, trailer: dict | None = None) -> Path:
+        """Write what is left and the trailer (counters). Returns the log path."""
+        with self._lock:
+            if self.closed:
+                return self.path
+            self._flush_locked()
+            tr = {"closed_utc": utc_now(), "rows": str(self.rows), "events": str(self.events),
+                  "heartbeat_acks": str(self.heartbeat_acks)}
+            tr.update({k: str(v) for k, v in (trailer or {}).items()})
+            try:
+                self._sink.close(tr)
+            except OSError as e:
+                raise InputError(f"closing {self.path} failed: {e.strerror or e}") from None
+            self.closed = True
+        return self.path

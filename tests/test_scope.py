@@ -1,0 +1,146 @@
+"""rodctl scope: one live session (rod shape, time series, arm/disarm/set/record), in a window under Xvfb."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import time
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from host_tools import RODCTL, rodctl_env
+
+from rodctl.link import protocol as P
+
+
+@pytest.fixture
+def xdisplay():
+    """A private Xvfb; -displayfd makes it pick a free display number and tell us when it is ready."""
+    xvfb = shutil.which("Xvfb")
+    if xvfb is None:
+        pytest.fail("Xvfb is not installed (bash .ci/run installs it)")
+    r, w = os.pipe()
+    proc = subprocess.Popen([xvfb, "-displayfd", str(w), "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
+                            pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(w)
+    try:
+        with os.fdopen(r) as f:
+            number = f.readline().strip()
+        assert number.isdigit(), "Xvfb did not start"
+        yield f":{number}"
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def _start_scope(display: str, *args):
+    env = rodctl_env(DISPLAY=display)
+    env.pop("MPLBACKEND", None)
+    return subprocess.Popen([*RODCTL, "scope", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env)
+
+
+def _wait_for_window(proc, seconds: float = 60.0) -> None:
+    deadline = time.monotonic() + seconds
+    line = ""
+    while time.monotonic() < deadline and not line.startswith("scope: "):
+        line = proc.stderr.readline()
+        if not line and proc.poll() is not None:
+            raise AssertionError(f"scope exited: {proc.stderr.read()}")
+
+
+def _red_rod(img: np.ndarray):
+    """(rows, cols) of the pure-red pixels the scope draws the rod with."""
+    red = (img[..., 0] > 240) & (img[..., 1] < 25) & (img[..., 2] < 25)
+    return np.nonzero(red)
+
+
+def test_scope_draws_a_balanced_rod_upright_in_a_real_window(xdisplay):
+    from PIL import ImageGrab
+
+    # The virtual board's rod starts at rest upright (theta0_deg=180) and the scope arms balance at once.
+    proc = _start_scope(xdisplay, "--port", "sim://?theta0_deg=180", "--arm", "balance", "--duration", "60")
+    try:
+        _wait_for_window(proc)
+        time.sleep(4.0)  # a few seconds of balance, drawn every 100 ms
+        img = np.asarray(ImageGrab.grab(xdisplay=xdisplay).convert("RGB")).astype(int)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    rows, cols = _red_rod(img)
+    assert rows.size > 200, "no rod drawn"
+    height, width = rows.max() - rows.min(), cols.max() - cols.min()
+    assert height > 5 * width, (height, width)  # a vertical rod
+    # the base (black square on the motor axis) is at the bottom end of the rod: it points up
+    cx = int(np.median(cols))
+    black = (img[..., :3] < 40).all(axis=-1)
+    near_bottom = black[rows.max() - 10:rows.max() + 10, cx - 12:cx + 12].sum()
+    near_top = black[rows.min() - 10:rows.min() + 10, cx - 12:cx + 12].sum()
+    assert near_bottom > 10 and near_top == 0, (near_bottom, near_top)
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err and "scope ended: disarmed" in err
+
+
+def test_ctrl_c_disarms_and_closes_without_a_traceback(xdisplay):
+    proc = _start_scope(xdisplay, "--port", "sim://", "--arm", "swing-up")
+    try:
+        _wait_for_window(proc)
+        time.sleep(1.5)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err and "Exception" not in err
+    assert err.strip().splitlines()[-1] == "scope ended: disarmed"
+
+
+def test_scope_without_a_display_is_one_clear_line():
+    env = rodctl_env()
+    env.pop("DISPLAY", None)
+    env.pop("WAYLAND_DISPLAY", None)
+    r = subprocess.run([*RODCTL, "scope", "--port", "sim://"], capture_output=True, text=True, env=env, timeout=60)
+    assert r.returncode == 1 and "Traceback" not in r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rodctl: the scope needs a display: no display")
+
+
+def test_keys_and_buttons_arm_set_record_and_disarm(tmp_path):
+    """The scope's actions on a live virtual board, drawn with Agg (what a key or button calls)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from rodctl.cli.scope import Scope
+    from rodctl.link.session import Session
+    from rodctl.logs import read_log
+
+    out = tmp_path / "rec.csv"
+    args = SimpleNamespace(port="sim://?theta0_deg=180", params=None, overrides=[], record=str(out), format=None,
+                           force=False)
+    with Session(args.port) as s:
+        fig = Figure(figsize=(12, 7))
+        FigureCanvasAgg(fig)
+        scope = Scope(s, fig, edge_length_m=0.031, window_s=5.0, args=args, title="test")
+        scope._key(SimpleNamespace(key="r"))  # start recording
+        scope._key(SimpleNamespace(key="b"))
+        assert s.wait_telemetry(timeout=5).mode == P.Mode.BALANCE
+        scope.action("set", "swing_amplitude=0.03")
+        assert "swing_amplitude = 0.03" in scope.message
+        scope.action("set", "swing_amplitude=0.03 catch_angle_deg=1e42")
+        assert scope.message.startswith("refused: ")
+        time.sleep(0.5)
+        scope.update()
+        x, y = scope.rod.get_data()
+        assert y[-1] > 0.9 * 0.031 * s.hello.n  # the drawn rod is the estimate: upright
+        assert "theta1" in scope.status.get_text() and "from upright" in scope.status.get_text()
+        scope._key(SimpleNamespace(key="d"))
+        assert scope.message.startswith("disarmed")
+        scope._key(SimpleNamespace(key="r"))  # stop recording
+        assert scope.recorded == [str(out)]
+    log = read_log(out)
+    assert len(log.data) > 300 and "BALANCE" in set(log.data["mode_name"])
+    notes = [e for e in log.events["info_text"] if "recording" in e]
+    assert notes == ["recording started (scope)", "recording stopped (scope)"]
