@@ -1,0 +1,245 @@
+"""rodctl identify: run identification experiments on the board (or fit recorded logs) and write a
+parameter file with the rig's identified motor and rod values."""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import sys
+import time
+from pathlib import Path
+
+from rodgains.errors import InputError, UserError
+
+from rodctl.cli.device import add_design_args, add_port_arg
+
+REST_RATE_RAD_S = 0.05  # the rod counts as at rest below this base rate ...
+REST_HOLD_S = 0.5  # ... for this long
+REST_TIMEOUT_S = 20.0
+# The base stops long before the rod above it: its bending swing barely moves the count, so a still
+# count does not mean a straight rod. The fit starts every record from a straight rod at rest.
+SETTLE_S = 4.0
+END_MARGIN_S = 3.0  # beyond the experiment's duration before the host gives up waiting
+
+
+def _nominal(args, meta: dict | None = None):
+    """(Params, where from): --params/--set, else the log's own parameters, else the defaults."""
+    from rodgains.params import load_params
+
+    if args.params or args.overrides:
+        return load_params(args.params, args.overrides), args.params or "defaults with --set"
+    if meta:
+        from rodctl.logs import params_of
+
+        p = params_of(meta)
+        if p is not None:
+            return p, "the log's parameters"
+    return load_params(), "defaults (gains/rodgains/default.toml): pass --params with your rod's measurements"
+
+
+def _check_out(args) -> None:
+    out = Path(args.out)
+    if out.exists() and not args.force:
+        raise InputError(f"{out} exists; pass --force to overwrite")
+    if not out.parent.exists():
+        raise InputError(f"--out {out}: folder {out.parent} does not exist")
+
+
+def _confirm(args, text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+    if args.yes:
+        return
+    if not sys.stdin.isatty():
+        raise InputError("the motor is about to move and no one can confirm: pass --yes to run without asking")
+    answer = input("The motor will move. Rod hanging at rest, nothing in its way? [y/N] ").strip().lower()
+    if answer not in ("y", "yes"):
+        raise InputError("stopped before moving the motor (not confirmed)")
+
+
+def _wait_rest(session, settle: float = 0.0) -> None:
+    """`settle` seconds, then until the base holds still (the fit starts every record at rest); a
+    FAULT is reported."""
+    from rodctl.link import protocol as P
+    from rodctl.link.session import reason_text
+
+    if settle > 0:
+        print(f"  letting the rod settle for {settle:g} s", file=sys.stderr, flush=True)
+        end = time.monotonic() + settle
+        while time.monotonic() < end:
+            session.check()
+            time.sleep(0.05)
+    still_since, deadline = None, time.monotonic() + REST_TIMEOUT_S
+    while time.monotonic() < deadline:
+        session.check()
+        t = session.wait_telemetry(timeout=1.0)
+        if t.mode == P.Mode.FAULT:
+            raise UserError(f"device is in FAULT ({reason_text(t.reason)}): run `rodctl clear-fault` first")
+        if abs(t.base_rate) < REST_RATE_RAD_S:
+            still_since = still_since or time.monotonic()
+            if time.monotonic() - still_since >= REST_HOLD_S:
+                return
+        else:
+            still_since = None
+        time.sleep(0.02)
+    raise UserError(f"the rod did not come to rest within {REST_TIMEOUT_S:g} s (|base rate| < {REST_RATE_RAD_S} rad/s)")
+
+
+def run_experiment(session, exp, log_path: Path, params, params_source: str):
+    """Play one experiment while logging every frame; returns (log path, final telemetry)."""
+    from rodctl.link import protocol as P
+    from rodctl.logs import LogWriter, device_metadata
+
+    meta = device_metadata(session.hello, port=session.port, params=params, params_source=params_source,
+                           start_unix=session.open_unix)
+    writer = LogWriter(log_path, meta, n=session.hello.n)
+    session.add_listener(writer, replay=False)
+    ended = "error"
+    try:
+        session.command(exp.command(), what=f"identify {exp.name}")
+        deadline = time.monotonic() + exp.duration + END_MARGIN_S
+        last = session.wait_telemetry(timeout=1.0)
+        started = time.monotonic()
+        seen = False  # telemetry queued before the ACK still shows DISARMED: wait for IDENTIFY first
+        while time.monotonic() < deadline:
+            time.sleep(0.05)
+            session.check()
+            writer.maybe_flush()  # rows reach the file while the rod moves: a crash keeps them
+            last = session.telemetry
+            if last is None:
+                continue
+            seen = seen or last.mode == P.Mode.IDENTIFY
+            if last.mode != P.Mode.IDENTIFY and (seen or time.monotonic() - started > 1.0):
+                break
+        else:
+            ended = "timeout"
+            raise UserError(f"{exp.name}: still in IDENTIFY {END_MARGIN_S:g} s after its end; disarmed")
+        time.sleep(0.1)  # the frames already on their way
+        ended = "fault" if last.mode == P.Mode.FAULT else "done"
+        return log_path, last
+    finally:
+        if ended != "done":
+            try:
+                session.disarm()
+            except UserError:
+                pass
+        session.remove_listener(writer)
+        writer.close({"end": ended, "experiment": exp.describe()})
+
+
+def run_port(args) -> int:
+    from rodctl.cli.device import design_params, stop_signals
+    from rodctl.ident import experiments as E
+    from rodctl.link import protocol as P
+    from rodctl.link.session import Session, reason_text
+
+    if not 0 < args.scale <= 4:
+        raise InputError(f"--scale must be in (0, 4], got {args.scale:g}")
+    exps = [e.scaled(torque=args.scale) for e in E.select(args.experiment)]
+    _check_out(args)
+    log_dir = Path(args.log_dir)
+    log_dir.mkdir(parents=True, exist_ok=True)
+    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    logs = []
+    with stop_signals(), Session(args.port) as session:
+        params, source = design_params(session, args)
+        if params is None:
+            params, source = _nominal(args)
+        h = session.hello
+        if h.decimation != 1:
+            session.set("telemetry_decimation", 1)  # the fit replays every period's duty
+        print(f"identify: {session.port}, firmware N={h.n} at {1e6 / h.period_us:g} Hz; nominal parameters: {source}",
+              file=sys.stderr)
+        for i, exp in enumerate(exps, 1):
+            _wait_rest(session, args.settle if i > 1 else 0.0)
+            _confirm(args, f"[{i}/{len(exps)}] {exp.describe()}")
+            path = log_dir / f"identify-{stamp}-{exp.name}.csv"
+            path, last = run_experiment(session, exp, path, params, source)
+            logs.append(path)
+            if last.mode == P.Mode.FAULT:
+                raise UserError(f"{exp.name}: safety limit tripped: {reason_text(last.reason)} "
+                                f"({P.Reason(last.reason).name}); the motor is stopped (FAULT); log kept: {path}")
+            print(f"  done: {path}", file=sys.stderr, flush=True)
+    return fit_logs(args, logs, params, source)
+
+
+def fit_logs(args, logs: list[Path], params=None, source: str = "") -> int:
+    from rodctl.ident import experiments as E
+    from rodctl.ident import fit as F
+    from rodctl.ident import report as R
+
+    records, digests, meta0 = [], [], None
+    for path in logs:
+        meta, recs = E.records_from_log(path)
+        meta0 = meta0 or meta
+        records += recs
+        digests.append((Path(path).name, E.file_sha256(path)))
+    if params is None:
+        params, source = _nominal(args, meta0)
+    print(f"fit: {len(records)} records, {sum(r.seconds for r in records):.1f} s of excitation; nominal: {source}",
+          file=sys.stderr, flush=True)
+    model = F.fit_model(params, exact=args.exact_plant)
+    print(f"fit plant: {'the parameter file' + chr(39) + 's [plant]' if not model else ', '.join(model)}",
+          file=sys.stderr, flush=True)
+    res = F.fit(records, params, starts=args.starts, progress=F.progress_printer(), model=model)
+    print(f"identified in {res.seconds:.1f} s ({res.evaluations} simulations); "
+          f"theta_1 residual {res.rms_counts:.2f} counts RMS; validation (held-out {100 * F.VALIDATION_FRACTION:g} %): "
+          f"{res.validation_fit_pct:.1f} % fit")
+    print("\n".join(F.report_lines(res)))
+    print("identifiability:")
+    print("\n".join("  " + s for s in F.identifiability_text(res)))
+    out = Path(args.out)
+    out.write_text(R.parameter_file(params, res, digests))
+    plot = Path(args.plot) if args.plot else out.with_suffix(".png")
+    R.figure(res, plot)
+    print(f"wrote {out} and {plot}")
+    if res.out_of_range:
+        for name, why in res.out_of_range.items():
+            print(f"rodctl: {name}: {why}; kept nominal in {out}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def run_identify(args) -> int:
+    if args.logs and args.port:
+        raise InputError("give recorded LOG files or --port, not both")
+    if args.starts < 1:
+        raise InputError("--starts must be >= 1")
+    if args.logs:
+        _check_out(args)
+        # A shell glob such as logs/*.csv also matches the CSV logs' event sidecars: not logs of their own.
+        logs = [Path(p) for p in args.logs if not str(p).endswith((".events.csv", ".csv.json"))]
+        return fit_logs(args, logs)
+    return run_port(args)
+
+
+def register(sub) -> None:
+    from rodctl.ident.experiments import DEFAULT_SEQUENCE
+
+    names = ", ".join(e.name for e in DEFAULT_SEQUENCE)
+    p = sub.add_parser(
+        "identify", help="measure the rig: excitation experiments + output-error fit -> parameter file",
+        description="With --port: run the identification experiments (default: " + names + ") with the rod "
+                    "hanging, asking before each one moves the motor, log each, then fit. With LOG files: fit "
+                    "recorded logs. The fit identifies rotor inertia, viscous and Coulomb friction, a "
+                    "torque-constant scale and the rod's Young's modulus and damping against the project's C "
+                    "plant, and writes a complete parameter file with 95 %% intervals. Exit 2: bad input or "
+                    "data that cannot identify the rig; exit 1: a value outside its physical range (not written).",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("logs", nargs="*", metavar="LOG", help="recorded logs to fit instead of running experiments")
+    add_port_arg(p)
+    p.add_argument("--experiment", action="append", metavar="NAME", help=f"run only these ({names}; repeatable)")
+    p.add_argument("--out", default="my_rod.toml", metavar="PATH", help="parameter file to write (default my_rod.toml)")
+    p.add_argument("--force", action="store_true", help="overwrite --out")
+    p.add_argument("--plot", metavar="PNG", help="figure of measured vs simulated theta_1 (default: --out with .png)")
+    p.add_argument("--log-dir", default=".", metavar="DIR", help="where the experiments' logs go (default .)")
+    p.add_argument("--yes", action="store_true", help="do not ask before moving the motor")
+    p.add_argument("--settle", type=float, default=SETTLE_S, metavar="S",
+                   help=f"wait S seconds between experiments for the rod's swing to die out (default {SETTLE_S:g})")
+    p.add_argument("--scale", type=float, default=1.0, metavar="X",
+                   help="multiply every experiment's torque amplitude (default 1: sized for the Table I rod)")
+    p.add_argument("--starts", type=int, default=3, metavar="N", help="optimizer starts (default 3)")
+    p.add_argument("--exact-plant", action="store_true",
+                   help="fit with the parameter file's [plant] as is (a DER plant makes the fit ~10x slower); "
+                        "default: the inextensible rod with at most 20 flexible edges")
+    add_design_args(p)
+    p.set_defaults(func=run_identify)

@@ -1,0 +1,195 @@
+"""Identification experiments: what the board plays (IDENTIFY), and the records they leave.
+
+An experiment is one IDENTIFY command: the board computes the excitation itself, so the torque the
+log shows is exactly what was played, period by period. A Record is the part of a telemetry log
+(or of a SIL run) spent in mode IDENTIFY: one row per control period with the encoder count and
+the duty and torque that were held over that period.
+
+The default sequence keeps the rod near hanging (the firmware's angle limit is measured from
+hanging in IDENTIFY) and gives every fitted parameter something to see:
+  release  a short push, then a free swing with the driver on at zero current: the pendulum and
+           bending modes and their decay (rod stiffness, damping, inertia ratio);
+  chirp    a sweep through the pendulum and first bending frequencies (inertia, stiffness);
+  prbs     broadband +-amplitude (inertia, viscous friction, torque constant);
+  steps    +A, 0, -A, 0 levels: velocity reversals and coasting (Coulomb against viscous friction).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+from rodgains.errors import InputError, UserError
+
+from rodctl.link import protocol as P
+
+MODE_IDENTIFY = int(P.Mode.IDENTIFY)
+
+
+@dataclass(frozen=True)
+class Experiment:
+    name: str
+    excitation: int  # P.Excitation code
+    amplitude: float  # [N m] at the output shaft
+    duration: float  # [s]
+    shape1: float  # chirp f0 [Hz] | PRBS bit time [s] | step hold [s] | release pulse [s]
+    shape2: float = 0.0  # chirp f1 [Hz]
+    seed: int = 0  # PRBS LFSR start state
+
+    def describe(self) -> str:
+        """What the motor will do, in words, before it does it."""
+        a = f"{self.amplitude * 1e3:g} mN m"
+        e = P.Excitation(self.excitation)
+        if e == P.Excitation.CHIRP:
+            what = f"a torque sine of {a} sweeping {self.shape1:g} -> {self.shape2:g} Hz"
+        elif e == P.Excitation.PRBS:
+            what = f"a random +-{a} torque switching every {self.shape1 * 1e3:g} ms"
+        elif e == P.Excitation.STEPS:
+            what = f"torque steps +{a}, 0, -{a}, 0 held {self.shape1 * 1e3:g} ms each"
+        else:
+            what = f"a {a} push for {self.shape1 * 1e3:g} ms, then zero torque (driver on) while the rod swings freely"
+        return f"{self.name}: {what}, {self.duration:g} s"
+
+    def command(self):
+        return P.MESSAGE_CLASSES[P.MsgType.IDENTIFY](excitation=self.excitation, seed=self.seed,
+                                                     amplitude=self.amplitude, duration=self.duration,
+                                                     shape1=self.shape1, shape2=self.shape2)
+
+    def scaled(self, torque: float = 1.0, time: float = 1.0) -> "Experiment":
+        """The same experiment with the amplitude and the duration scaled (shorter runs for tests)."""
+        return replace(self, amplitude=self.amplitude * torque, duration=self.duration * time)
+
+
+# Amplitudes for the Table I rod on the testbed motor: a static 60 mN m holds the 0.1 kg rod about
+# 50 deg out, so every experiment stays inside the 60 deg angle limit from hanging with margin.
+DEFAULT_SEQUENCE = (
+    Experiment("release", int(P.Excitation.RELEASE), 0.05, 3.0, 0.12),
+    Experiment("chirp", int(P.Excitation.CHIRP), 0.02, 4.0, 0.3, 8.0),
+    Experiment("prbs", int(P.Excitation.PRBS), 0.025, 2.5, 0.03, 0.0, 0xACE1),
+    Experiment("steps", int(P.Excitation.STEPS), 0.025, 3.0, 0.5),
+)
+EXPERIMENTS = {e.name: e for e in DEFAULT_SEQUENCE}
+
+
+def select(names: list[str] | None) -> list[Experiment]:
+    if not names:
+        return list(DEFAULT_SEQUENCE)
+    out = []
+    for n in names:
+        if n not in EXPERIMENTS:
+            raise InputError(f"--experiment {n}: unknown; choose from {', '.join(EXPERIMENTS)}")
+        out.append(EXPERIMENTS[n])
+    return out
+
+
+@dataclass
+class Record:
+    """One IDENTIFY run, one row per control period k (the count read at t_k; duty and torque held
+    over [t_k, t_k + period])."""
+
+    name: str
+    period: float  # [s]
+    count: np.ndarray  # encoder counts (0 hanging at power-on)
+    duty: np.ndarray  # signed duty [-1, 1]
+    torque: np.ndarray  # commanded output torque [N m]
+    rate: np.ndarray  # the firmware's base rate [rad/s]
+    end_reason: int = 0  # P.Reason after the run (NONE: played to the end)
+    ended_in: int = 0  # P.Mode after the run
+    source_sha256: str = ""  # SHA-256 of the log file it came from (or of its arrays)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def seconds(self) -> float:
+        return len(self.count) * self.period
+
+    def digest(self) -> str:
+        if not self.source_sha256:
+            h = hashlib.sha256()
+            for a in (self.count, self.duty, self.torque):
+                h.update(np.ascontiguousarray(a).tobytes())
+            self.source_sha256 = h.hexdigest()
+        return self.source_sha256
+
+
+def file_sha256(path: str | Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def records_from_rows(rows: np.ndarray, period: float, name: str, sha256: str) -> list[Record]:
+    """The IDENTIFY runs of a log's rows (read_log): telemetry rows in mode IDENTIFY, split where the
+    mode leaves IDENTIFY or a frame is missing (a lost frame would shift the replayed input)."""
+    tlm = rows[rows["type_name"] == "TELEMETRY"] if "type_name" in (rows.dtype.names or ()) else rows
+    if len(tlm) == 0:
+        return []
+    mode = np.asarray(tlm["mode_code"], np.int64)
+    t_us = np.asarray(tlm["device_time_us"], np.int64)
+    ident = mode == MODE_IDENTIFY
+    out = []
+    k, n = 0, len(tlm)
+    while k < n:
+        if not ident[k]:
+            k += 1
+            continue
+        j = k + 1
+        while j < n and ident[j] and (t_us[j] - t_us[j - 1]) % (1 << 32) == round(period * 1e6):
+            j += 1
+        after = j if j < n else None
+        rec = Record(f"{name}[{len(out)}]" if out or j < n and ident[j:].any() else name, period,
+                     np.asarray(tlm["encoder_count"][k:j], np.int64), np.asarray(tlm["duty_frac"][k:j], float),
+                     np.asarray(tlm["torque_Nm"][k:j], float), np.asarray(tlm["base_rate_rad_s"][k:j], float),
+                     end_reason=int(tlm["reason_code"][after]) if after is not None else 0,
+                     ended_in=int(mode[after]) if after is not None else MODE_IDENTIFY,
+                     source_sha256=sha256)
+        if after is not None and ident[after]:
+            rec.notes.append(f"telemetry gap after {j - k} periods (decimated or lost frames): split there")
+        out.append(rec)
+        k = j
+    return out
+
+
+def records_from_log(path: str | Path, period: float | None = None) -> tuple[dict, list[Record]]:
+    """(metadata, IDENTIFY records) of a recorded log."""
+    from rodctl.logs import read_log
+
+    meta, rows = read_log(path)
+    if period is None:
+        period = float(meta.get("period_us", 1000)) * 1e-6
+    return meta, records_from_rows(rows, period, Path(path).stem, file_sha256(path))
+
+
+# ---- the same experiment through the SIL (tests, benchmarks, `rodctl identify` acceptance) ----------
+
+
+def run_sil(exp: Experiment, sil, plant, settle: float = 0.0) -> Record:
+    """Play `exp` with the firmware's SIL library (rod_sil_identify) against `plant` (duty input), from
+    the plant's current state; the record ends where IDENTIFY ends (end, or a safety trip)."""
+    from rodctl.sim.plant import run_closed_loop
+
+    import ctypes
+
+    lib = sil.lib if hasattr(sil, "lib") else sil
+    lib.rod_sil_identify.restype = ctypes.c_int
+    lib.rod_sil_identify.argtypes = [ctypes.c_int, ctypes.c_float, ctypes.c_float, ctypes.c_float, ctypes.c_float,
+                                     ctypes.c_int]
+    lib.rod_sil_reason.restype = ctypes.c_int
+    lib.rod_sil_rate.restype = ctypes.c_float
+    lib.rod_sil_reset()
+    ack = lib.rod_sil_identify(exp.excitation, exp.amplitude, exp.duration, exp.shape1, exp.shape2, exp.seed)
+    if ack != 0:
+        raise UserError(f"{exp.name}: the firmware refused the excitation ({P.AckResult(ack).name})")
+    periods = int(round(exp.duration / plant.params.dt)) + 1
+    log = run_closed_loop(plant, sil, periods, reset=False, stop_on_mode=None)
+    ident = log["mode"] == MODE_IDENTIFY
+    # mode[k] is the mode after step k: the steps that played the excitation are the IDENTIFY ones.
+    k_end = int(np.argmin(ident)) if not ident.all() else len(ident)
+    est = log["est"]
+    return Record(exp.name, float(log["period"]), log["count"][:k_end].astype(np.int64),
+                  log["duty"][:k_end].astype(float), log["torque_cmd"][:k_end].astype(float),
+                  est[:k_end, -1].astype(float) if est.size else np.zeros(k_end),
+                  end_reason=int(lib.rod_sil_reason()), ended_in=int(log["mode"][k_end]) if k_end < len(ident) else 5)

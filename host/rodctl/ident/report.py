@@ -1,0 +1,90 @@
+"""What an identification leaves behind: the parameter file with the identified values, and the figure."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from rodctl.ident.fit import FIT_PARAMS, FitResult, with_values
+
+
+def written_values(res: FitResult) -> tuple[dict[str, float], dict[str, str]]:
+    """(values to write, comment per parameter): identified values where they are identifiable and
+    physical; the nominal value, with the reason, where not (never a silent write)."""
+    values, notes = {}, {}
+    for fp in FIT_PARAMS:
+        if fp.name not in res.fitted:
+            continue
+        v, ci = res.values[fp.name], res.ci95[fp.name]
+        if fp.name in res.out_of_range:
+            values[fp.name] = res.nominal[fp.name]
+            notes[fp.name] = f"NOT WRITTEN: fit gave {res.out_of_range[fp.name]}; kept nominal"
+        elif not res.identifiable[fp.name]:
+            values[fp.name] = res.nominal[fp.name]
+            notes[fp.name] = f"not identifiable ({res.why[fp.name]}); kept nominal, fit gave {v:.4g}"
+        else:
+            values[fp.name] = v
+            notes[fp.name] = f"identified {v:.4g} +- {ci:.2g} {fp.unit} (95 %)"
+    return values, notes
+
+
+def parameter_file(params, res: FitResult, log_digests: list[tuple[str, str]]) -> str:
+    """A complete parameter file: params with the identified values, each commented with its interval,
+    headed by the SHA-256 of every log the values came from."""
+    values, notes = written_values(res)
+    out = with_values(params, values)
+    text = out.to_toml()
+    # Comments go on the lines of the keys that carry each fitted value (the scale lives in k_t and k_e).
+    keys = {fp.name: ([fp.key] if fp.key else ["motor.torque_constant", "motor.back_emf_constant"]) for fp in FIT_PARAMS}
+    lines, section = [], None
+    for line in text.splitlines():
+        head = line.split("#", 1)[0].strip()
+        if head.startswith("[") and head.endswith("]"):
+            section = head[1:-1].strip()
+        elif "=" in head and section:
+            key = f"{section}.{head.split('=', 1)[0].strip()}"
+            for name, ks in keys.items():
+                if key in ks and name in notes:
+                    what = notes[name] if name != "torque_constant_scale" else f"torque-constant scale: {notes[name]}"
+                    line = f"{line}\n# ^ rodctl identify: {what}"
+        lines.append(line)
+    head = ["# Identified by `rodctl identify` (output-error fit against the project's C plant).",
+            f"# Validation on held-out data: {res.validation_fit_pct:.1f} % fit of theta_1; "
+            f"residual {res.rms_counts:.2f} encoder counts RMS.",
+            "# Logs (SHA-256):"]
+    head += [f"#   {digest}  {name}" for name, digest in log_digests]
+    return "\n".join(head + [""] + lines) + "\n"
+
+
+def figure(res: FitResult, path: str | Path) -> Path:
+    """Measured against simulated theta_1 for every record, and the residual in encoder counts."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(res.theta_meas)
+    fig, axes = plt.subplots(2, n, figsize=(4.2 * n, 5.2), squeeze=False, sharex="col")
+    count = 2 * math.pi / res.counts_per_rev
+    for j, (m, s, k, name) in enumerate(zip(res.theta_meas, res.theta_sim, res.split, res.record_names)):
+        t = np.arange(len(m)) * res.period
+        a, b = axes[0, j], axes[1, j]
+        a.plot(t, np.degrees(m), lw=1.0, label="measured (encoder)")
+        a.plot(t, np.degrees(s), lw=1.0, ls="--", label="simulated (identified)")
+        a.axvspan(t[k] if k < len(t) else t[-1], t[-1], color="0.9", label="held out")
+        a.set_title(name)
+        b.plot(t, (m - s) / count, lw=0.6, color="C3")
+        b.axvspan(t[k] if k < len(t) else t[-1], t[-1], color="0.9")
+        b.set_xlabel("time [s]")
+        if j == 0:
+            a.set_ylabel("theta_1 [deg]")
+            b.set_ylabel("residual [counts]")
+            a.legend(fontsize=7, loc="upper right")
+    fig.suptitle(f"rodctl identify: validation {res.validation_fit_pct:.1f} % fit on held-out data")
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
