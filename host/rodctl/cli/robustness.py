@@ -1,0 +1,171 @@
+"""rodctl robustness: the robustness matrix plus Monte Carlo plants, one score, a JSON and a heatmap."""
+
+from __future__ import annotations
+
+import shlex
+import sys
+import time
+from pathlib import Path
+
+from rodctl.cli.gains import _shown_path, _writable_dir, add_param_args, params_from_args
+
+
+def add_exec_args(p) -> None:
+    """--jobs / --scheduler: where the runs go (shared by robustness, tune and sweep)."""
+    p.add_argument("--jobs", type=int, metavar="N", help="local worker processes (default: every core)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on an existing Dask cluster instead, e.g. tcp://10.0.0.5:8786 (start workers with "
+                        "`dask worker ADDRESS --nthreads 1` from a clone with rodctl installed)")
+
+
+def add_score_args(p) -> None:
+    """What a score is made of (shared by robustness, tune and sweep --scenario score)."""
+    p.add_argument("--cases", default="matrix", metavar="NAME",
+                   help="case set of the matrix: matrix (default), quick, nominal, plants")
+    p.add_argument("--samples", type=int, metavar="M", help="Monte Carlo plants (default: uncertainty.samples)")
+    p.add_argument("--seed", type=int, metavar="S", help="seed of the draws (default: uncertainty.seed)")
+    p.add_argument("--seconds", type=float, metavar="S",
+                   help="simulated length of every run [s] (default: the matrix's for each task)")
+
+
+def check_score_args(args) -> None:
+    from rodgains.errors import InputError
+
+    from rodctl.robust.score import case_set
+
+    case_set(args.cases)
+    if args.samples is not None and args.samples < 0:
+        raise InputError(f"--samples {args.samples}: must be >= 0")
+    if args.seed is not None and not 0 <= args.seed < 2**32:
+        raise InputError(f"--seed {args.seed}: must be in 0 .. 2^32 - 1")
+    if args.seconds is not None and not args.seconds > 0:
+        raise InputError(f"--seconds {args.seconds}: must be > 0")
+
+
+def command_line(argv_tail: list[str]) -> str:
+    return " ".join(shlex.quote(a) for a in ["rodctl", *argv_tail])
+
+
+def _fmt(v, nd=2) -> str:
+    return "-" if v is None else f"{v:.{nd}f}"
+
+
+def table_lines(rows: list[dict]) -> list[str]:
+    """A line per case (both tasks side by side); Monte Carlo plants summed up at the end."""
+    from rodctl.sim.matrix import TASKS
+
+    def cell(r):
+        if r is None:
+            return f"{'':>9s} {'':>9s} {'':>8s}"
+        word = "refused" if r.get("refused") else "pass" if r.get("passed") else "FAIL"
+        return f"{_fmt(r.get('settle_s')):>9s} {_fmt(r.get('final_dev_deg')):>9s} {word:>8s}"
+
+    by: dict[str, dict] = {}
+    for r in rows:
+        if r.get("kind") != "draw":
+            by.setdefault(r["case"], {})[r["task"]] = r
+    lines = [f"  {'':14s}" + "".join(f" | {t:^28s}" for t in TASKS),
+             f"  {'case':14s}" + "".join(f" | {'settle s':>9s} {'end deg':>9s} {'result':>8s}" for _ in TASKS)]
+    for name, d in by.items():
+        lines.append(f"  {name:14s}" + "".join(f" | {cell(d.get(t))}" for t in TASKS))
+    draws = [r for r in rows if r.get("kind") == "draw"]
+    if draws:
+        parts = []
+        for t in TASKS:
+            sub = [r for r in draws if r["task"] == t]
+            parts.append(f"{t} {sum(1 for r in sub if r.get('passed'))}/{len(sub)} pass")
+        n = len({r["draw"] for r in draws})
+        lines.append(f"  Monte Carlo plants ({n}): " + ", ".join(parts))
+    return lines
+
+
+def plant_from_args(args):
+    """The true rod of --plant FILE (None: the design's own parameter file describes it)."""
+    from rodgains.errors import ParamError
+    from rodgains.params import load_params
+
+    if args.plant is None:
+        return None
+    try:
+        return load_params(args.plant)
+    except ParamError as e:
+        raise ParamError(f"--plant: {e}") from None
+
+
+def run_robustness(args) -> int:
+    from rodctl.build.sil_build import build_sil
+    from rodctl.robust import figures, score as S
+    from rodctl.robust.execute import Runner
+    from rodctl.robust.output import write_json
+
+    params = params_from_args(args)
+    plant = plant_from_args(args)
+    check_score_args(args)
+    for flag, path in (("--json", args.json), ("--plot", args.plot)):
+        if path:
+            _writable_dir(path, flag)  # before the runs, not after them
+    units = S.units(params, args.cases, args.samples, args.seed, args.seconds, plant=plant)
+    t0 = time.monotonic()
+    with Runner(args.jobs, args.scheduler) as runner:
+        build_sil(params)  # design and compile once here: a refused design stops before any run (exit 3)
+        print(f"{len(units)} runs (case set {args.cases!r} and Monte Carlo plants) on the {runner.where}",
+              file=sys.stderr)
+        if plant is not None:
+            print(f"the design of {_shown_path(params.source)} judged on the rod of {_shown_path(plant.source)}",
+                  file=sys.stderr)
+        rows = runner.run(units, desc="robustness")
+        where = runner.where
+    wall = time.monotonic() - t0
+    sc = S.score(rows, params)
+    print("\n".join(table_lines(rows)))
+    print(f"{sc.text()}  [{wall:.1f} s on the {where}]")
+    seed = params["uncertainty"]["seed"] if args.seed is None else args.seed
+    samples = params["uncertainty"]["samples"] if args.samples is None else args.samples
+    written = []
+    if args.json:
+        doc = {
+            "command": command_line(sys.argv[1:]),
+            "parameters": params.values,
+            "params_source": params.source,
+            "params_sha256": params.sha256(),
+            "cases": args.cases,
+            "samples": samples,
+            "seed": seed,
+            "seconds": args.seconds,
+            "plant_source": None if plant is None else plant.source,
+            "plant_sha256": None if plant is None else plant.sha256(),
+            "plant_parameters": None if plant is None else plant.values,
+            "score": sc.to_json(),
+            "score_definition": S.__doc__.strip(),
+            "runs": rows,
+        }
+        written.append(write_json(args.json, doc))
+    if args.plot:
+        on = "faithful plant" if plant is None else f"rod of {_shown_path(plant.source)}"
+        title = (f"{_shown_path(params.source)}: {sc.text()}\ncase set {args.cases!r} + Monte Carlo plants (seed {seed}) on the "
+                 f"{on}")
+        written.append(figures.heatmap(rows, Path(args.plot), title))
+    for w in written:
+        print(f"wrote {w}")
+    return 0
+
+
+def register(sub) -> None:
+    r = sub.add_parser("robustness", help="score a design: the robustness matrix plus Monte Carlo plants",
+                       description="Run every case of the robustness matrix (balance and swing-up) and Monte Carlo "
+                                   "plants drawn from the [uncertainty] table on the faithful plant, print a table "
+                                   "and one score in [0, 1] (the fraction of runs that pass; the margin breaks ties: "
+                                   "host/rodctl/robust/score.py). Exit 2: bad input; exit 3: the design is refused.")
+    add_param_args(r)
+    r.add_argument("--plant", metavar="FILE",
+                   help="judge the design on another rod: this parameter file (and its [plant] table) is the true "
+                        "plant, e.g. the hidden rig behind sim://?plant=FILE; the matrix's relative cases scale its "
+                        "values. --params/--set still make the design (default: the design's own file is the plant)")
+    add_score_args(r)
+    add_exec_args(r)
+    r.add_argument("--json", default="robustness.json", metavar="PATH",
+                   help="every run's metrics and parameters (default robustness.json; '' for none)")
+    r.add_argument("--plot", default="robustness.png", metavar="PNG",
+                   help="case x metric heatmap, pass/fail marked (default robustness.png; '' for none)")
+    r.set_defaults(func=run_robustness)
+

@@ -1,0 +1,107 @@
+"""rodctl tune: search weights, controller order and swing-up for the best robustness score."""
+
+from __future__ import annotations
+
+import shlex
+import sys
+import time
+from pathlib import Path
+
+from rodgains.errors import UserError
+
+from rodctl.cli.gains import _writable_dir, add_param_args, params_from_args
+from rodctl.cli.robustness import add_exec_args, add_score_args, check_score_args
+
+
+def reproduce_command(args) -> str:
+    """The command that reruns this search, spelled from the arguments (not from how they were typed)."""
+    parts = ["rodctl", "tune"]
+    if args.params:
+        parts += ["--params", args.params]
+    for o in args.overrides:
+        parts += ["--set", o]
+    parts += ["--cases", args.cases]
+    for flag, v in (("--samples", args.samples), ("--seed", args.seed), ("--seconds", args.seconds),
+                    ("--only", args.only)):
+        if v is not None:
+            parts += [flag, str(v)]
+    parts += ["--budget", str(args.budget)]
+    if args.study:
+        parts += ["--study", args.study]
+    parts += ["--out", args.out]
+    return " ".join(shlex.quote(p) for p in parts)
+
+
+def run_tune(args) -> int:
+    from rodgains.errors import InputError
+
+    from rodctl.robust import score as S
+    from rodctl.robust import tune as T
+    from rodctl.robust.execute import Runner
+    from rodctl.robust.output import atomic_write
+
+    params = params_from_args(args)
+    check_score_args(args)
+    if args.budget < 1:
+        raise InputError(f"--budget {args.budget}: must be >= 1")
+    _writable_dir(args.out, "--out")
+    if Path(args.out).exists() and not args.force:
+        raise InputError(f"{args.out} exists; pass --force to overwrite")
+    dims = T.space(args.only)
+    seed = params["uncertainty"]["seed"] if args.seed is None else args.seed
+    samples = params["uncertainty"]["samples"] if args.samples is None else args.samples
+
+    def make_units(p):
+        return S.units(p, args.cases, samples, seed, args.seconds)
+
+    meta = {"params_sha256": params.sha256(), "cases": args.cases, "samples": samples, "seed": seed,
+            "seconds": args.seconds, "space": [d.text(params) for d in dims]}
+    runs = len(make_units(params))
+    t0 = time.monotonic()
+    with Runner(args.jobs, args.scheduler) as runner:
+        print(f"tune: {len(dims)} parameters, {runs} runs per trial (case set {args.cases!r} + Monte Carlo "
+              f"plants: {samples}), budget {args.budget} trials, on the {runner.where}", file=sys.stderr)
+        try:
+            summary = T.tune(params, runner, dims=dims, budget=args.budget, make_units=make_units,
+                             study_dir=args.study, meta=meta, sampler_seed=seed)
+        except KeyboardInterrupt:
+            if args.study:
+                print(f"rodctl: interrupted; every finished trial is kept in {args.study}; resume with: "
+                      f"{reproduce_command(args)}", file=sys.stderr)
+            else:
+                print("rodctl: interrupted (no --study folder: the trials are gone)", file=sys.stderr)
+            return 130
+    wall = time.monotonic() - t0
+    check = " ".join(shlex.quote(x) for x in ["rodctl", "robustness", "--params", args.out, "--cases", args.cases,
+                                              "--samples", str(samples), "--seed", str(seed)]
+                     + (["--seconds", str(args.seconds)] if args.seconds else []))
+    text = T.tuned_file(params, summary, dims, reproduce_command(args), check)
+    atomic_write(args.out, text)
+    b, s = summary["best"], summary["start"]
+    print(f"start  (trial #{summary['start_number']}): score {s.get('score', 0):.4f} ({s.get('passed', 0)}/"
+          f"{s.get('runs', 0)}), margin {s.get('margin', 0):.4f}")
+    print(f"tuned  (trial #{summary['best_number']}): score {b.get('score', 0):.4f} ({b.get('passed', 0)}/"
+          f"{b.get('runs', 0)}), margin {b.get('margin', 0):.4f}")
+    for k, v in summary["best_values"].items():
+        print(f"  {k} = {T.fmt_value(v)}")
+    print(f"wrote {args.out}  ({summary['trials']} trials, {wall:.0f} s in this session)")
+    return 0
+
+
+def register(sub) -> None:
+    t = sub.add_parser("tune", help="search gains, model order and swing-up for the best robustness score",
+                       description="Optuna (TPE) searches LQR and observer weights, the controller's model order, "
+                                   "the swing-up amplitude and angles and the catch angle within safe ranges to "
+                                   "maximize the robustness score (rodctl robustness). The first trial is the "
+                                   "parameter file itself. --study DIR keeps every finished trial (Ctrl-C is safe) "
+                                   "and resumes. Writes a complete parameter file whose comments say what was tuned, "
+                                   "the score and the command that reproduces it.")
+    add_param_args(t)
+    add_score_args(t)
+    add_exec_args(t)
+    t.add_argument("--budget", type=int, default=100, metavar="N", help="finished trials in the study (default 100)")
+    t.add_argument("--study", metavar="DIR", help="keep the trials in DIR/journal.log and resume from it")
+    t.add_argument("--only", metavar="KEYS", help="search only these parameters (comma-separated section.key)")
+    t.add_argument("--out", required=True, metavar="TOML", help="write the tuned parameter file here")
+    t.add_argument("--force", action="store_true", help="overwrite --out")
+    t.set_defaults(func=run_tune)

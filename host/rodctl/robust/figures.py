@@ -1,0 +1,172 @@
+"""Figures read at a glance: the robustness heatmap (case x metric) and the sweep frontier."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+# metric key, column title, digits
+HEAT_METRICS = (
+    ("settle_s", "settle 1 deg [s]", 2),
+    ("final_dev_deg", "final [deg]", 2),
+    ("max_dev_deg", "peak error [deg]", 1),
+    ("peak_torque_Nm", "peak torque [N m]", 3),
+    ("caught_at_s", "caught [s]", 2),
+    ("base_turns_max", "base turns", 2),
+    ("est_rms_deg", "est. error [deg]", 2),
+)
+
+
+def _value(row: dict, key: str) -> float:
+    v = row.get(key)
+    return math.nan if v is None else float(v)
+
+
+def _verdict(row: dict) -> tuple[str, str]:
+    if row.get("refused"):
+        return "refused", "#9e9e9e"
+    return ("pass", "#2e7d32") if row.get("passed") else ("FAIL", "#c62828")
+
+
+def heatmap(rows: list[dict], path: Path, title: str) -> Path:
+    """One panel per task: a row per case (and Monte Carlo draw), a column per metric. Each column is
+    coloured on its own scale (lighter = smaller = better for every metric here); the first column
+    says pass / FAIL / refused; empty cells are runs where the metric does not exist (never settled,
+    not a swing-up)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tasks = list(dict.fromkeys(r["task"] for r in rows))
+    height = max(len([r for r in rows if r["task"] == t]) for t in tasks)
+    fig, axes = plt.subplots(1, len(tasks), figsize=(7.2 * len(tasks), 1.2 + 0.22 * height), squeeze=False)
+    cmap = matplotlib.colormaps["viridis_r"]
+    for ax, task in zip(axes[0], tasks):
+        sub = [r for r in rows if r["task"] == task]
+        always = {"settle_s"} | ({"caught_at_s"} if task == "swingup" else set())
+        cols = [m for m in HEAT_METRICS if m[0] in always or any(r.get(m[0]) is not None for r in sub)]
+        M = np.array([[_value(r, k) for k, _, _ in cols] for r in sub], dtype=float).reshape(len(sub), len(cols))
+        for j in range(M.shape[1]):
+            col = M[:, j]
+            fin = np.isfinite(col)
+            lo, hi = (np.min(col[fin]), np.max(col[fin])) if fin.any() else (0.0, 1.0)
+            for i in range(M.shape[0]):
+                if fin[i]:
+                    f = 0.5 if hi == lo else (col[i] - lo) / (hi - lo)
+                    ax.add_patch(plt.Rectangle((j + 1, i), 1, 1, color=cmap(0.15 + 0.7 * f)))
+                    ax.text(j + 1.5, i + 0.5, f"{col[i]:.{cols[j][2]}f}", ha="center", va="center", fontsize=6.5,
+                            color="white" if f > 0.45 else "black")
+                else:
+                    ax.add_patch(plt.Rectangle((j + 1, i), 1, 1, color="#eeeeee"))
+                    ax.text(j + 1.5, i + 0.5, "never" if cols[j][0] in ("settle_s", "caught_at_s") else "-",
+                            ha="center", va="center", fontsize=6, color="#777777")
+        for i, r in enumerate(sub):
+            word, color = _verdict(r)
+            ax.add_patch(plt.Rectangle((0, i), 1, 1, color=color))
+            ax.text(0.5, i + 0.5, word, ha="center", va="center", fontsize=7, color="white", weight="bold")
+        ax.set_xlim(0, len(cols) + 1)
+        ax.set_ylim(len(sub), 0)
+        ax.set_xticks(np.arange(len(cols) + 1) + 0.5)
+        ax.set_xticklabels(["result"] + [c[1] for c in cols], rotation=35, ha="right", fontsize=7)
+        ax.set_yticks(np.arange(len(sub)) + 0.5)
+        ax.set_yticklabels([r["case"] for r in sub], fontsize=7)
+        ax.tick_params(length=0)
+        n_pass = sum(1 for r in sub if r.get("passed"))
+        ax.set_title(f"{task}: {n_pass}/{len(sub)} pass", fontsize=9)
+        for s in ax.spines.values():
+            s.set_visible(False)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+    return path
+
+
+def frontier_figure(rows: list[dict], x: str, y: str | None, path: Path, title: str, *, color_key: str = "settle_s",
+                    color_label: str = "settle to 1 deg [s]", critical_length_m: float | None = None) -> Path:
+    """Grid x (horizontal) by y (vertical): the colour is `color_key` where the run passed, a red cross
+    where it failed, grey R where the design was refused; a black line joins, for each y, the largest x
+    that passed with every smaller x passing (the frontier). With x = rod.length, a dashed line marks
+    the continuum critical length."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from rodctl.robust.sweep import frontier
+
+    xs = sorted({r[x] for r in rows})
+    ys = sorted({r[y] for r in rows}) if y else [None]
+    # an evenly spaced numeric axis is drawn to scale; anything else (strings, 5,10,20) one column per value
+    steps = np.diff(np.asarray(xs, dtype=float)) if not isinstance(xs[0], str) and len(xs) > 1 else np.array([])
+    numeric = not isinstance(xs[0], str) and (len(xs) == 1 or bool(np.allclose(steps, steps[0])))
+    dx = float(steps[0]) if numeric and len(xs) > 1 else 1.0
+    fig, ax = plt.subplots(figsize=(8.0, 2.0 + 0.45 * len(ys)))
+    # the score colours every point; a run metric only the runs that passed
+    graded = color_key == "score"
+    vals = [r.get(color_key) for r in rows if (graded or r.get("passed")) and r.get(color_key) is not None]
+    vmax = 1.0 if graded or not vals else max(vals)
+    # lighter is better in both: a short settle time, a high score
+    cmap = matplotlib.colormaps["viridis" if graded else "viridis_r"]
+    xi = {v: i for i, v in enumerate(xs)}
+    for r in rows:
+        cx = r[x] if numeric else xi[r[x]]
+        cy = ys.index(r[y]) if y else 0
+        if r.get("refused"):
+            ax.add_patch(plt.Rectangle((cx - dx / 2, cy - 0.5), dx, 1, color="#bdbdbd"))
+            ax.text(cx, cy, "R", ha="center", va="center", fontsize=7, color="#555555")
+        elif graded and r.get(color_key) is not None:
+            ax.add_patch(plt.Rectangle((cx - dx / 2, cy - 0.5), dx, 1, color=cmap(r[color_key] / vmax if vmax else 0)))
+            ax.text(cx, cy, f"{r[color_key]:.2f}", ha="center", va="center", fontsize=6,
+                    color="white" if r[color_key] < 0.55 else "black")
+        elif r.get("passed") and r.get(color_key) is not None:
+            ax.add_patch(plt.Rectangle((cx - dx / 2, cy - 0.5), dx, 1, color=cmap(r[color_key] / vmax if vmax else 0)))
+        elif r.get("passed"):  # passed its criterion without settling to 1 deg
+            ax.add_patch(plt.Rectangle((cx - dx / 2, cy - 0.5), dx, 1, color="#c8e6c9"))
+            ax.text(cx, cy, "pass", ha="center", va="center", fontsize=6, color="#2e7d32")
+        else:
+            ax.add_patch(plt.Rectangle((cx - dx / 2, cy - 0.5), dx, 1, color="#fbe9e7"))
+            ax.plot([cx], [cy], marker="x", color="#c62828", ms=7, mew=1.5)
+    if y and not isinstance(xs[0], str):
+        fr = frontier(rows, x, y)
+        fx = [(fr[v] if numeric else xi[fr[v]]) + dx / 2 if fr[v] is not None else None for v in ys]
+        for i, v in enumerate(fx):
+            if v is not None:
+                ax.plot([v, v], [i - 0.5, i + 0.5], color="black", lw=2.2)
+    if critical_length_m is not None and x == "rod.length" and numeric:
+        ax.axvline(critical_length_m, color="black", ls="--", lw=1)
+        ax.text(critical_length_m, len(ys) - 0.45, f" continuum critical length {critical_length_m * 100:.2f} cm",
+                fontsize=7, va="bottom", clip_on=True)
+    if numeric:
+        ax.set_xlim(xs[0] - dx / 2, xs[-1] + dx / 2)
+    else:
+        ax.set_xlim(-0.5, len(xs) - 0.5)
+        ax.set_xticks(range(len(xs)))
+        ax.set_xticklabels(xs)
+    marked = critical_length_m is not None and x == "rod.length" and numeric
+    ax.set_ylim(-0.5, len(ys) - 0.5 + (0.5 if marked else 0))
+    ax.set_yticks(range(len(ys)))
+    ax.set_yticklabels([str(v) for v in ys] if y else [""])
+    ax.set_xlabel(x)
+    if y:
+        ax.set_ylabel(y)
+    sm = matplotlib.cm.ScalarMappable(cmap=cmap, norm=matplotlib.colors.Normalize(0, vmax))
+    fig.colorbar(sm, ax=ax, label=color_label, pad=0.02)
+    if marked:
+        top = ax.secondary_xaxis("top", functions=(lambda v: v / critical_length_m, lambda r: r * critical_length_m))
+        top.set_xlabel("length / continuum critical length", fontsize=8)
+        top.tick_params(labelsize=7)
+    legend = ("black bar: frontier (largest passing, no failure below); x: fail; R: design refused"
+              + ("" if graded else "; green: passed, never within 1 deg"))
+    ax.set_title(title + "\n" + legend, fontsize=8)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=130, bbox_inches="tight")
+    plt.close(fig)
+    return path

@@ -1,0 +1,269 @@
+"""rodctl tune: Optuna (TPE) searches weights, controller order and swing-up within safe ranges for the
+largest robustness objective (score.py: the fraction of runs passing, the margin breaking ties).
+
+Trials run one after another; the runs inside a trial go to the Runner (every core, or a Dask
+cluster). The first trial of a new study is the parameter file itself, so the best trial is never
+worse than the starting point. With `--study DIR` every finished trial is in DIR/journal.log
+(Optuna JournalStorage on a file) the moment it finishes: Ctrl-C keeps them, and the same command
+resumes until `--budget` trials have finished. DIR/trials.json lists every trial's values and
+score. DIR/study.json pins what the objective means (parameters, cases, draws); resuming with
+other inputs is refused.
+
+A candidate that the parameter checks reject, or whose design the generator refuses, scores 0.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from rodgains.errors import DesignRefused, InputError, ParamError
+from rodgains.params import SCHEMA, Params
+
+STUDY_NAME = "rodctl-tune"
+
+
+@dataclass(frozen=True)
+class Dim:
+    """One searched parameter: a float range (log-uniform when `log`), or a list of choices."""
+
+    name: str  # section.key
+    low: float = 0.0
+    high: float = 0.0
+    log: bool = False
+    choices: tuple = ()
+    why: str = ""
+
+    def bounds(self, params: Params) -> tuple[float, float]:
+        # the swing-up pump may never exceed the torque the safety limit allows
+        if self.name == "swing_up.amplitude":
+            return self.low, min(self.high, params["safety"]["torque_limit"])
+        # a catch must happen inside the angle limit, or the catch itself trips it
+        if self.name == "swing_up.catch_angle_deg":
+            return self.low, min(self.high, params["safety"]["angle_limit_deg"] - 5.0)
+        return self.low, self.high
+
+    def text(self, params: Params) -> str:
+        if self.choices:
+            return f"{self.name} in {{{', '.join(map(str, self.choices))}}}"
+        lo, hi = self.bounds(params)
+        return f"{self.name} in [{lo:g}, {hi:g}]" + (" (log)" if self.log else "")
+
+
+# The safe ranges. r_torque stays fixed: LQR is unchanged when Q and R scale together.
+SPACE: tuple[Dim, ...] = (
+    Dim("lqr.q_angle", 0.1, 1000.0, log=True, why="LQR weight on each angle error [1/rad^2]"),
+    Dim("lqr.q_rate", 1e-4, 10.0, log=True, why="LQR weight on each rate error [s^2/rad^2]"),
+    Dim("observer.process_noise_angle", 1e-3, 10.0, log=True, why="[rad^2/s]"),
+    Dim("observer.process_noise_rate", 0.1, 1000.0, log=True, why="[rad^2/s^3]"),
+    Dim("observer.measurement_noise", 1e-6, 1e-3, log=True, why="[rad^2 s]"),
+    # controller model order; the M4F step at N = 20 fits the 1 kHz budget (rodctl bench)
+    Dim("rod.edges", choices=(3, 4, 5, 6, 8, 10, 12, 16, 20), why="controller model order [-]"),
+    Dim("swing_up.amplitude", 0.02, 0.2, why="pump torque [N m], at most safety.torque_limit"),
+    Dim("swing_up.angle_deg", 10.0, 90.0, why="pump while |theta_1| < this [deg]"),
+    Dim("swing_up.catch_angle_deg", 10.0, 45.0, why="switch to balance within this of upright [deg]"),
+)
+
+
+def space(only: str | None = None) -> tuple[Dim, ...]:
+    """The searched dimensions (those the parameter schema has), or the subset `only` (comma-separated)."""
+    known = tuple(d for d in SPACE if d.name.split(".")[1] in SCHEMA.get(d.name.split(".")[0], {}))
+    if not only:
+        return known
+    names = [x.strip() for x in only.split(",") if x.strip()]
+    by = {d.name: d for d in known}
+    bad = [n for n in names if n not in by]
+    if bad or not names:
+        raise InputError(f"--only {only}: not a searched parameter; one or more of {', '.join(by)}")
+    return tuple(by[n] for n in names)
+
+
+def suggest(trial, dims: tuple[Dim, ...], params: Params) -> dict:
+    out = {}
+    for d in dims:
+        if d.choices:
+            out[d.name] = trial.suggest_categorical(d.name, list(d.choices))
+        else:
+            lo, hi = d.bounds(params)
+            out[d.name] = trial.suggest_float(d.name, lo, hi, log=d.log)
+    return out
+
+
+def candidate(params: Params, values: dict) -> Params:
+    return params.with_overrides(*(f"{k}={v!r}" for k, v in values.items()))
+
+
+def starting_point(params: Params, dims: tuple[Dim, ...]) -> dict:
+    """The parameter file's own values, for the dimensions where they are inside the searched range."""
+    out = {}
+    for d in dims:
+        sec, key = d.name.split(".")
+        v = params[sec][key]
+        lo, hi = d.bounds(params)
+        if (d.choices and v in d.choices) or (not d.choices and lo <= v <= hi):
+            out[d.name] = v
+    return out
+
+
+def open_study(study_dir: str | None, meta: dict, sampler_seed: int):
+    """A new or resumed Optuna study (journal file in study_dir, or in memory)."""
+    import optuna
+    from optuna.storages import JournalStorage
+    from optuna.storages.journal import JournalFileBackend
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    sampler = optuna.samplers.TPESampler(seed=sampler_seed, multivariate=True)
+    if study_dir is None:
+        return optuna.create_study(study_name=STUDY_NAME, direction="maximize", sampler=sampler)
+    folder = Path(study_dir)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"--study {study_dir}: not a folder")
+    folder.mkdir(parents=True, exist_ok=True)
+    meta_path = folder / "study.json"
+    if meta_path.exists():
+        old = json.loads(meta_path.read_text())
+        diff = [k for k in meta if old.get(k) != meta[k]]
+        if diff:
+            raise InputError(f"--study {study_dir}: made for other inputs ({', '.join(diff)} differ); "
+                           f"use a new --study folder")
+    else:
+        from rodctl.robust.output import write_json
+
+        write_json(meta_path, meta)
+    storage = JournalStorage(JournalFileBackend(str(folder / "journal.log")))
+    return optuna.create_study(study_name=STUDY_NAME, direction="maximize", sampler=sampler, storage=storage,
+                               load_if_exists=True)
+
+
+def completed(study) -> list:
+    from optuna.trial import TrialState
+
+    return [t for t in study.get_trials(deepcopy=False) if t.state == TrialState.COMPLETE]
+
+
+def evaluate(params: Params, runner, make_units: Callable[[Params], list], on_row=None) -> dict:
+    """Score one candidate: {'objective', 'score', 'passed', 'runs', 'margin'} or a refusal (objective 0)."""
+    from rodctl.build.sil_build import build_sil
+    from rodctl.robust import score as S
+
+    try:
+        build_sil(params)  # design + compile once, here, before the runs fan out
+    except DesignRefused as e:
+        return {"objective": 0.0, "score": 0.0, "passed": 0, "runs": 0, "margin": 0.0, "refused": str(e)}
+    rows = runner.run(make_units(params), on_row=on_row, show=False)
+    sc = S.score(rows, params)
+    return {**sc.to_json(), "refused": ""}
+
+
+def tune(params: Params, runner, *, dims: tuple[Dim, ...], budget: int, make_units: Callable[[Params], list],
+         study_dir: str | None, meta: dict, sampler_seed: int, progress: bool = True) -> dict:
+    """Run trials until `budget` have finished; returns the summary the output file is written from.
+    KeyboardInterrupt propagates after the running trial is marked failed (finished ones stay)."""
+    from optuna.trial import TrialState
+
+    study = open_study(study_dir, meta, sampler_seed)
+    if not study.get_trials(deepcopy=False):
+        study.enqueue_trial(starting_point(params, dims))
+    done = completed(study)
+    bar = None
+    if progress:
+        import sys
+
+        from tqdm import tqdm
+
+        bar = tqdm(total=budget, initial=min(len(done), budget), desc="tune", unit="trial", file=sys.stderr,
+                   dynamic_ncols=True, mininterval=0.2 if sys.stderr.isatty() else 10.0)
+
+    def best_text() -> str:
+        try:
+            b = study.best_trial
+        except ValueError:
+            return "best -"
+        return f"best {b.user_attrs.get('score', 0):.4f} (#{b.number})"
+
+    try:
+        while len(completed(study)) < budget:
+            trial = study.ask()
+            try:
+                values = suggest(trial, dims, params)
+                try:
+                    cand = candidate(params, values)
+                except ParamError as e:
+                    result = {"objective": 0.0, "score": 0.0, "passed": 0, "runs": 0, "margin": 0.0,
+                              "refused": f"invalid parameters: {e}"}
+                else:
+                    count = [0]
+
+                    def on_row(_unit, _row):
+                        count[0] += 1
+                        if bar is not None:
+                            bar.set_postfix_str(f"trial {trial.number}: {count[0]} runs | {best_text()}", refresh=False)
+
+                    result = evaluate(cand, runner, make_units, on_row)
+            except BaseException:
+                study.tell(trial, state=TrialState.FAIL)
+                raise
+            for k, v in result.items():
+                trial.set_user_attr(k, v)
+            study.tell(trial, result["objective"])
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix_str(best_text())
+    finally:
+        if bar is not None:
+            bar.close()
+        if study_dir is not None:
+            write_trials(study, Path(study_dir) / "trials.json")
+    trials = completed(study)
+    best = study.best_trial
+    first = min(trials, key=lambda t: t.number)
+    return {
+        "best_number": best.number,
+        "best_values": {d.name: best.params[d.name] for d in dims if d.name in best.params},
+        "best": dict(best.user_attrs),
+        "start": dict(first.user_attrs),
+        "start_number": first.number,
+        "trials": len(trials),
+    }
+
+
+def write_trials(study, path: Path) -> None:
+    """Every trial (number, state, searched values, score, passed, runs, margin) as JSON, beside the journal."""
+    from rodctl.robust.output import write_json
+
+    rows = [{"number": t.number, "state": t.state.name, "values": dict(t.params), **dict(t.user_attrs)}
+            for t in study.get_trials(deepcopy=False)]
+    write_json(path, rows)
+
+
+def tuned_file(params: Params, summary: dict, dims: tuple[Dim, ...], reproduce: str, check: str) -> str:
+    """The complete parameter file of the best trial, with comments saying how it came to be."""
+    from rodctl.cli.gains import _shown_path as shown_path
+
+    best_p = candidate(params, summary["best_values"])
+    b, s = summary["best"], summary["start"]
+
+    def sc(d):
+        return f"{d.get('score', 0):.4f} ({d.get('passed', 0)}/{d.get('runs', 0)} runs pass, margin {d.get('margin', 0):.4f})"
+
+    lines = [
+        "# Tuned by `rodctl tune` (Optuna TPE) for the robustness score: the fraction of matrix and",
+        "# Monte Carlo runs that pass on the faithful plant, the margin breaking ties (host/rodctl/robust/score.py).",
+        f"# Starting point: {shown_path(params.source)} (sha256 {params.sha256()[:16]}), trial #{summary['start_number']}: "
+        f"score {sc(s)}",
+        f"# Tuned:          trial #{summary['best_number']} of {summary['trials']}: score {sc(b)}",
+        "# Searched (everything else is the starting point's):",
+    ]
+    for d in dims:
+        sec, key = d.name.split(".")
+        old, new = params[sec][key], best_p[sec][key]
+        lines.append(f"#   {d.text(params):52s} {old!r} -> {new!r}")
+    lines += [f"# Reproduce: {reproduce}", f"# Check:     {check}", "#", ""]
+    return "\n".join(lines) + best_p.to_toml()
+
+
+def fmt_value(v) -> str:
+    return f"{v:.6g}" if isinstance(v, float) and math.isfinite(v) else str(v)

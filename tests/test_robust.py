@@ -1,0 +1,343 @@
+"""rodctl robustness / tune / sweep: seeded draws, the score, grids, bad input, and the same rows from the
+local pool, a Dask LocalCluster and a `dask scheduler` + `dask worker` pair, also when a worker dies."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from rodgains.params import load_params
+
+from rodctl.cli import main
+from rodctl.robust import score as S
+from rodctl.robust import sweep as W
+from rodctl.robust.execute import Runner
+from rodctl.robust.uncertainty import draws
+
+SECONDS = 1.0  # simulated length of every run in these tests [s]: the verdicts do not matter, the rows do
+
+
+def quick_units(samples=2):
+    return S.units(load_params(), "quick", samples=samples, seed=7, seconds=SECONDS)
+
+
+@pytest.fixture(scope="module")
+def local_rows():
+    from rodctl.build.sil_build import build_sil
+
+    build_sil(load_params())  # compiled once here; every worker then finds it in the build cache
+    with Runner(jobs=2, progress=False) as runner:
+        return runner.run(quick_units())
+
+
+# ---- draws and score -------------------------------------------------------------------------------
+
+def test_draws_are_seeded_and_stay_inside_the_ranges():
+    p = load_params()
+    a, b, c = draws(p, 50, seed=3), draws(p, 50, seed=3), draws(p, 50, seed=4)
+    assert a == b and a != c
+    u = p["uncertainty"]
+    for d in a:
+        vals = dict(o.split("=") for o in d.overrides)
+        E = float(vals["rod.youngs_modulus"]) / p["rod"]["youngs_modulus"]
+        assert 1 - u["youngs_modulus_rel"] <= E <= 1 + u["youngs_modulus_rel"]
+        damp = float(vals["rod.damping"]) / p["rod"]["damping"]
+        assert 1 / u["rod_damping_factor"] <= damp <= u["rod_damping_factor"]
+        assert 11.0 - 1e-9 <= float(vals["driver.supply_voltage"]) <= 13.0 + 1e-3
+        assert vals["motor.torque_constant"] == vals["motor.back_emf_constant"]
+        assert d.delay_periods in (0, 1)
+    assert {d.delay_periods for d in a} == {0, 1}
+
+
+def test_switching_one_range_off_leaves_the_other_draws_alone():
+    p = load_params()
+    off = p.with_overrides("uncertainty.density_rel=0.0")
+    for d_on, d_off in zip(draws(p, 10, 1), draws(off, 10, 1)):
+        on = dict(o.split("=") for o in d_on.overrides)
+        of = dict(o.split("=") for o in d_off.overrides)
+        assert "rod.density" in on and "rod.density" not in of
+        assert on["rod.youngs_modulus"] == of["rod.youngs_modulus"]
+        assert d_on.delay_periods == d_off.delay_periods
+
+
+def test_score_is_the_pass_fraction_and_the_margin_only_breaks_ties():
+    p = load_params()
+    fast = {"passed": True, "settle_s": 0.5, "max_dev_deg": 30.0, "peak_torque_Nm": 0.1}
+    slow = {"passed": True, "settle_s": 3.0, "max_dev_deg": 60.0, "peak_torque_Nm": 0.2}
+    fell = {"passed": False, "settle_s": None, "max_dev_deg": 180.0, "peak_torque_Nm": 0.2}
+    refused = {"passed": False, "refused": True}
+    a, b = S.score([fast, fell], p), S.score([slow, fell], p)
+    assert a.score == b.score == 0.5
+    assert a.objective > b.objective
+    # any 4/4 beats any 3/4, whatever the margins
+    assert S.score([fast] * 3 + [fell], p).objective < S.score([slow] * 4, p).objective
+    assert S.score([fell] * 4, p).score == 0.0 and S.score([slow] * 3 + [refused], p).score == 0.75
+    assert 0.0 <= a.margin <= 1.0 and S.run_margin(refused, 0.2) == 0.0
+
+
+def test_units_cover_every_case_of_the_set_for_both_tasks_and_the_draws():
+    from rodctl.sim.matrix import CASE_SETS, cases_for
+
+    units = quick_units(samples=3)
+    cases = sum(len(cases_for(t, CASE_SETS["quick"])) for t in ("balance", "swingup"))
+    assert len(units) == cases + 3 * 2
+    assert len({u.key for u in units}) == len(units)
+
+
+# ---- the pool, Dask, and dying workers ------------------------------------------------------------
+
+def test_local_pool_rows_are_complete_and_in_order(local_rows):
+    units = quick_units()
+    assert [(r["case"], r["task"]) for r in local_rows] == [(u.case.name, u.task) for u in units]
+    for r in local_rows:
+        assert isinstance(r["passed"], bool) and r["simulated_s"] == pytest.approx(SECONDS)
+    json.dumps(local_rows, allow_nan=False)  # every run's metrics, strict JSON
+
+
+def test_a_killed_pool_worker_loses_nothing(local_rows):
+    with Runner(jobs=2, progress=False) as runner:
+        killed = []
+
+        def kill_once(_unit, _row):
+            pids = runner.local_worker_pids()
+            if not killed and pids:
+                os.kill(pids[0], signal.SIGKILL)
+                killed.append(pids[0])
+
+        rows = runner.run(quick_units(), on_row=kill_once)
+    assert killed
+    assert rows == local_rows
+
+
+def test_dask_local_cluster_gives_the_same_rows(local_rows):
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        with Runner(scheduler=cluster.scheduler_address, progress=False) as runner:
+            assert runner.jobs == 2
+            rows = runner.run(quick_units())
+    assert rows == local_rows
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _dask(*args, log: Path) -> subprocess.Popen:
+    # the dask CLI of this interpreter's environment, not whatever is first on PATH
+    code = "import sys; from dask.__main__ import main; sys.argv[0] = 'dask'; sys.exit(main())"
+    return subprocess.Popen([sys.executable, "-c", code, *args], stdout=log.open("w"), stderr=subprocess.STDOUT,
+                            start_new_session=True)
+
+
+def test_dask_scheduler_and_workers_as_subprocesses_survive_a_killed_worker(local_rows, tmp_path):
+    pytest.importorskip("distributed")
+    from distributed import Client
+
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    procs = [_dask("scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard",
+                   log=tmp_path / "scheduler.log")]
+    try:
+        for i in range(2):
+            procs.append(_dask("worker", address, "--nthreads", "1", "--no-nanny", "--no-dashboard",
+                               "--host", "127.0.0.1", "--name", f"w{i}", log=tmp_path / f"worker{i}.log"))
+        deadline = time.monotonic() + 120
+        while True:  # bounded generously: two noisy cores
+            try:
+                with Client(address, timeout=5) as c:
+                    if len(c.scheduler_info()["workers"]) == 2:
+                        break
+            except OSError:
+                pass
+            assert time.monotonic() < deadline, "dask workers did not come up"
+            time.sleep(0.5)
+        with Runner(scheduler=address, progress=False) as runner:
+            same = runner.run(quick_units())
+            killed = []
+
+            def kill_once(_unit, _row):
+                if not killed:
+                    procs[1].send_signal(signal.SIGKILL)
+                    killed.append(procs[1].pid)
+
+            after_kill = runner.run(quick_units(), on_row=kill_once)
+        assert same == local_rows
+        assert killed and procs[1].wait(timeout=30) == -signal.SIGKILL
+        assert after_kill == local_rows
+    finally:
+        # workers before the scheduler: a worker whose scheduler is gone hangs on its way out
+        for p in procs[::-1]:
+            if p.poll() is None:
+                p.terminate()
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait(timeout=30)
+
+
+# ---- grids -----------------------------------------------------------------------------------------
+
+def test_grid_ranges_lists_and_frontier():
+    a = W.parse_axis("rod.length=0.13:0.21:0.005")
+    assert len(a.values) == 17 and a.values[0] == 0.13 and a.values[-1] == 0.21
+    assert W.parse_axis("rod.edges=5,10,20").values == (5, 10, 20)
+    assert W.parse_axis("plant.model=der,inextensible").values == ("der", "inextensible")
+    assert W.size(W.parse_grid(["rod.length=0.13:0.21:0.005", "rod.edges=5,10,20"])) == 51
+    rows = [{"x": x, "y": 1, "passed": x < 3} for x in range(5)] + [{"x": x, "y": 2, "passed": x != 1}
+                                                                     for x in range(5)]
+    assert W.frontier(rows, "x", "y") == {1: 2, 2: 0}
+
+
+@pytest.mark.parametrize("spec, words", [
+    ("rod.nope=1,2", "unknown parameter"),
+    ("rod.length=0.2:0.1:0.01", "inverted range"),
+    ("rod.length=", "empty"),
+    ("rod.length=0.1:0.2:0", "step must be > 0"),
+    ("rod.edges=1,5", "rod.edges"),
+    ("rod.edges=2:8:0.5", "integer"),
+])
+def test_bad_grids_are_one_line_exit_2(spec, words, tmp_path, capsys):
+    out = tmp_path / "s.parquet"
+    assert main(["sweep", "--grid", spec, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("rodctl: ") and "\n" not in err and words in err
+    assert not out.exists()
+
+
+def test_a_huge_grid_asks_for_yes(tmp_path, capsys):
+    out = tmp_path / "s.parquet"
+    assert main(["sweep", "--grid", "rod.length=0.1:0.2:0.0001", "--grid", "lqr.q_angle=1:200:1",
+                 "--out", str(out)]) == 2
+    assert "--yes" in capsys.readouterr().err and not out.exists()
+
+
+@pytest.mark.parametrize("argv", [
+    ["robustness", "--cases", "nope"],
+    ["tune", "--cases", "nope", "--out", "x.toml"],
+    ["sweep", "--grid", "rod.edges=5", "--cases", "nope", "--scenario", "score", "--out", "x.parquet"],
+])
+def test_unknown_case_set_is_one_line_exit_2(argv, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("rodctl: --cases nope: unknown case set") and "\n" not in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_unreachable_scheduler_is_one_line_exit_2(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["robustness", "--cases", "nominal", "--samples", "0", "--scheduler", f"127.0.0.1:{_free_port()}"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("rodctl: --scheduler tcp://127.0.0.1:") and "cannot reach" in err[-1]
+    assert not (tmp_path / "robustness.json").exists()
+
+
+# ---- the commands end to end (short runs) -------------------------------------------------------------
+
+def test_robustness_writes_json_and_heatmap(tmp_path, capsys):
+    js, png = tmp_path / "r.json", tmp_path / "r.png"
+    assert main(["robustness", "--cases", "quick", "--samples", "1", "--seconds", str(SECONDS), "--jobs", "2",
+                 "--json", str(js), "--plot", str(png)]) == 0
+    doc = json.loads(js.read_text())
+    out = capsys.readouterr().out
+    assert f"score {doc['score']['score']:.4f}" in out
+    assert doc["score"]["runs"] == len(doc["runs"]) == len(quick_units(samples=1))
+    assert doc["parameters"]["uncertainty"]["samples"] == load_params()["uncertainty"]["samples"]
+    draw_rows = [r for r in doc["runs"] if r["kind"] == "draw"]
+    assert draw_rows and all(r["plant_overrides"] for r in draw_rows)
+    assert png.stat().st_size > 10_000
+
+
+def test_sweep_refused_design_is_a_row_and_parquet_has_one_row_per_run(tmp_path, capsys):
+    pq = pytest.importorskip("pyarrow.parquet")
+    out = tmp_path / "s.parquet"
+    # design.method = continuous on the paper's model is refused by the generator (README)
+    assert main(["sweep", "--grid", "design.method=sampled,continuous", "--set", "motor.design_includes_motor=false",
+                 "--seconds", str(SECONDS), "--jobs", "2", "--out", str(out)]) == 0
+    rows = pq.read_table(out).to_pylist()
+    assert [r["design.method"] for r in rows] == ["sampled", "continuous"]
+    assert rows[1]["refused"] and "refused" in rows[1]["reason"] and not rows[0]["refused"]
+    assert out.with_suffix(".png").exists()
+    assert "1 refused" in capsys.readouterr().out
+
+
+def test_tune_tiny_budget_writes_a_complete_file_and_resumes(tmp_path, capsys):
+    study, out = tmp_path / "study", tmp_path / "tuned.toml"
+    argv = ["tune", "--cases", "nominal", "--samples", "1", "--seconds", str(SECONDS), "--only",
+            "lqr.q_angle,swing_up.amplitude", "--jobs", "2", "--study", str(study), "--out", str(out)]
+    assert main(argv + ["--budget", "2"]) == 0
+    text = out.read_text()
+    assert "# Reproduce: rodctl tune" in text and "lqr.q_angle in [0.1, 1000] (log)" in text
+    tuned = load_params(out)  # a complete parameter file
+    start = load_params()
+    assert tuned["rod"] == start["rod"] and tuned["observer"] == start["observer"]
+    capsys.readouterr()
+    assert main(argv + ["--budget", "3", "--force"]) == 0  # resumes: one more trial, not three
+    assert "(3 trials" in capsys.readouterr().out
+    trials = json.loads((study / "trials.json").read_text())
+    assert [t["number"] for t in trials] == [0, 1, 2] and all("score" in t for t in trials)
+    # the study pins its inputs
+    assert main(argv[:4] + ["2"] + argv[5:] + ["--budget", "3", "--force"]) == 2
+
+
+def _finished_trials(study: Path) -> int:
+    import optuna
+    from optuna.storages import JournalStorage
+    from optuna.storages.journal import JournalFileBackend
+
+    if not (study / "journal.log").exists():
+        return 0
+    s = optuna.load_study(study_name="rodctl-tune", storage=JournalStorage(JournalFileBackend(str(study / "journal.log"))))
+    return sum(1 for t in s.trials if t.state.name == "COMPLETE")
+
+
+def test_ctrl_c_keeps_finished_trials_and_the_study_resumes(tmp_path):
+    study, out = tmp_path / "study", tmp_path / "tuned.toml"
+    argv = [sys.executable, "-m", "rodctl.cli", "tune", "--cases", "nominal", "--samples", "0", "--seconds", "0.5",
+            "--only", "lqr.q_angle", "--jobs", "1", "--study", str(study), "--out", str(out)]
+    p = subprocess.Popen(argv + ["--budget", "1000"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         start_new_session=True)
+    try:
+        deadline = time.monotonic() + 180
+        while _finished_trials(study) < 2:
+            assert p.poll() is None and time.monotonic() < deadline
+            time.sleep(0.5)
+        os.killpg(p.pid, signal.SIGINT)  # what Ctrl-C sends: the whole process group
+        _, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    assert p.returncode == 130 and "every finished trial is kept" in err
+    assert not out.exists()
+    kept = _finished_trials(study)
+    assert kept >= 2
+    r = subprocess.run(argv + ["--budget", str(kept + 1)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert f"({kept + 1} trials" in r.stdout
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["robustness", "--json", "{tmp}/missing/r.json"], "does not exist"),
+    (["robustness", "--plot", "{tmp}"], "is a folder"),
+    (["sweep", "--grid", "rod.edges=5", "--out", "{tmp}/missing/s.parquet"], "does not exist"),
+    (["tune", "--out", "{tmp}/missing/t.toml"], "does not exist"),
+    (["robustness", "--jobs", "0"], "--jobs 0"),
+    (["tune", "--budget", "0", "--out", "{tmp}/t.toml"], "--budget 0"),
+])
+def test_bad_outputs_and_counts_fail_before_any_run(argv, words, tmp_path, capsys):
+    assert main([a.replace("{tmp}", str(tmp_path)) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("rodctl: ") and "\n" not in err and words in err
+    assert list(tmp_path.iterdir()) == []
