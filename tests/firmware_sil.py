@@ -16,7 +16,7 @@ from rodgains.params import load_params
 from rodctl.link import protocol as P
 from rodctl.build.sil_build import build_sil, write_header
 
-MODE = {"DISARMED": 0, "BALANCE": 1, "SWING_UP": 2, "FAULT": 3, "CATCH": 4}
+MODE = {"DISARMED": 0, "BALANCE": 1, "SWING_UP": 2, "FAULT": 3, "CATCH": 4, "IDENTIFY": 5}
 REASON = {"NONE": 0, "HOST": 1, "ANGLE_LIMIT": 2, "SPEED_LIMIT": 3, "DRIVER_FAULT": 4, "HEARTBEAT": 5,
           "NON_FINITE": 6, "OVERRUN": 7}
 ACK = {"OK": 0, "BAD_VALUE": 1, "BAD_STATE": 2}
@@ -48,7 +48,7 @@ def library(overrides: tuple[str, ...] = ()) -> C.CDLL:
         "rod_sil_edges": (i, []), "rod_sil_arm": (None, [i]), "rod_sil_arm_result": (i, [i]),
         "rod_sil_step": (f, [i32]), "rod_sil_status": (i, [fp, i]), "rod_sil_duty": (f, []),
         "rod_sil_enable": (i, []), "rod_sil_reason": (i, []), "rod_sil_rate": (f, []),
-        "rod_sil_set": (i, [i, f]), "rod_sil_clear_fault": (i, []), "rod_sil_inject_nan": (None, []),
+        "rod_sil_set": (i, [i, f]), "rod_sil_identify": (i, [i, f, f, f, f, i]), "rod_sil_clear_fault": (i, []), "rod_sil_inject_nan": (None, []),
         "rod_dev_reset": (None, [sz]), "rod_dev_step": (f, [i32, u32, u32, i]), "rod_dev_duty": (f, []),
         "rod_dev_enable": (i, []), "rod_dev_reason": (i, []), "rod_dev_status": (i, [fp, i]),
         "rod_dev_write": (sz, [C.c_char_p, sz]), "rod_dev_read": (sz, [C.c_char_p, sz]),
@@ -106,6 +106,11 @@ class Sil:
 
     def set(self, param: str, value: float) -> int:
         return self.lib.rod_sil_set(PARAM[param], value)
+
+    def identify(self, excitation: int, amplitude: float, duration: float, shape1: float, shape2: float = 0.0,
+                 seed: int = 0) -> int:
+        """IDENTIFY (excitation 1 chirp, 2 PRBS, 3 steps, 4 release); the ack code."""
+        return self.lib.rod_sil_identify(excitation, amplitude, duration, shape1, shape2, seed)
 
     def clear_fault(self) -> int:
         return self.lib.rod_sil_clear_fault()

@@ -58,7 +58,7 @@ def ref_cobs(data: bytes) -> bytes:
 
 
 TYPES = {"TELEMETRY": 0x01, "HELLO": 0x02, "ACK": 0x03, "HEARTBEAT": 0x10, "ARM": 0x11, "DISARM": 0x12,
-         "CLEAR_FAULT": 0x13, "SET": 0x14, "HELLO_REQUEST": 0x15}
+         "CLEAR_FAULT": 0x13, "SET": 0x14, "HELLO_REQUEST": 0x15, "IDENTIFY": 0x16}
 
 
 def ref_payload(name: str, f: dict) -> bytes:
@@ -79,6 +79,9 @@ def ref_payload(name: str, f: dict) -> bytes:
         return struct.pack("<B", f["mode"])
     if name == "SET":
         return struct.pack("<Bf", f["param"], f["value"])
+    if name == "IDENTIFY":
+        return struct.pack("<BBHffff", f["excitation"], 0, f["seed"], f["amplitude"], f["duration"], f["shape1"],
+                           f["shape2"])
     assert not f, name
     return b""
 
@@ -172,6 +175,13 @@ def cases() -> list[dict]:
                                 (4, 10.0, "telemetry_decimation"), (5, 0.25, "heartbeat_timeout")]:
         add(f"set_{label}", "SET", 48 + param, 1000500 + param, {"param": param, "value": f32(value)}, f"SET {label}")
     add("set_negative", "SET", 60, 0xFFFFFFFF, {"param": 1, "value": f32(-1e-3)}, "negative value (device says BAD_VALUE)")
+    for exc, label, amp, dur, s1, s2, seed in [(1, "chirp", 0.02, 8.0, 0.5, 6.0, 0),
+                                               (2, "prbs", 0.015, 6.0, 0.025, 0.0, 0xACE1),
+                                               (3, "steps", 0.01, 4.0, 0.25, 0.0, 0),
+                                               (4, "release", 0.03, 5.0, 0.1, 0.0, 0)]:
+        add(f"identify_{label}", "IDENTIFY", 70 + exc, 2000000 + exc,
+            {"excitation": exc, "seed": seed, "amplitude": f32(amp), "duration": f32(dur), "shape1": f32(s1),
+             "shape2": f32(s2)}, f"IDENTIFY {label}")
     return C
 
 

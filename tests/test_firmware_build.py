@@ -73,7 +73,7 @@ def stale_header(tmp_path: Path, edit) -> Path:
 def test_stale_schema_version_stops_the_build(cc, tmp_path):
     if shutil.which(cc) is None:
         pytest.skip(f"{cc} not installed")
-    d = stale_header(tmp_path, lambda t: re.sub(r"(#define ROD_GAINS_SCHEMA_VERSION\s+)1", r"\g<1>2", t))
+    d = stale_header(tmp_path, lambda t: re.sub(r"(#define ROD_GAINS_SCHEMA_VERSION\s+)\d+", r"\g<1>999", t))
     r = compile_c(cc, tmp_path / "uses_config.c", [d, paths.CORE_SRC])
     assert r.returncode != 0
     assert "#error" in r.stderr and "ROD_GAINS_SCHEMA_VERSION" in r.stderr
@@ -85,10 +85,38 @@ def test_missing_macro_stops_the_build(tmp_path):
     assert r.returncode != 0 and "lacks a macro" in r.stderr
 
 
-def test_default_catch_angle_beyond_the_angle_limit_stops_the_build(tmp_path):
-    d = stale_header(tmp_path, lambda t: re.sub(r"(#define ROD_CATCH_ANGLE_RAD\s+)\S+", r"\g<1>1.2f", t))
-    r = compile_c("gcc", tmp_path / "uses_config.c", [d, paths.CORE_SRC])
-    assert r.returncode != 0 and "catch angle" in r.stderr
+@pytest.mark.parametrize("macro, value, message", [
+    ("ROD_CATCH_ANGLE_RAD", "1.2f", "default catch angle outside the SET range"),
+    ("ROD_CATCH_ANGLE_RAD", "0.01f", "default catch angle outside the SET range"),
+    ("ROD_SWING_AMPLITUDE_NM", "0.5f", "default swing amplitude outside the SET range"),
+    ("ROD_HEARTBEAT_TIMEOUT_S", "20.0f", "default heartbeat timeout outside the SET range"),
+    ("ROD_DUTY_MAX", "1.5f", "duty ceiling must be in (0, 1]"),
+])
+def test_hand_edited_float_defaults_stop_the_cpp_build(tmp_path, macro, value, message):
+    """C11 cannot compare floats at compile time; the board layer is C++ and can (rod_config.h)."""
+    d = stale_header(tmp_path, lambda t: re.sub(rf"(#define {macro}\s+)\S+", rf"\g<1>{value}", t))
+    src = tmp_path / "uses_config.cpp"
+    src.write_text('#include "rod_config.h"\nint rod_config_probe;\n')
+    r = subprocess.run(["g++", "-std=gnu++14", f"-I{d}", f"-I{paths.CORE_SRC}", "-c", str(src), "-o",
+                        str(tmp_path / "u.o")], capture_output=True, text=True)
+    assert r.returncode != 0 and message in r.stderr
+
+
+def test_rod_config_has_no_float_static_assert_in_c():
+    """Comparing floats in _Static_assert is a GCC extension clang rejects (the fuzz build needs clang)."""
+    text = _code_only((paths.CORE_SRC / "rod_config.h").read_text())
+    c_part = re.sub(r"#ifdef __cplusplus.*?#endif", "", text, flags=re.S)
+    for m in re.finditer(r"ROD_STATIC_ASSERT\((.*?),\s*\"", c_part, flags=re.S):
+        assert not re.search(r"\d\.\d*f|_RAD|_NM|_S\b|_V\b|_OHM|_MAX\b", m.group(1)), m.group(1)
+
+
+@pytest.mark.skipif(shutil.which("clang") is None, reason="clang not installed (.ci/run installs it)")
+@pytest.mark.parametrize("which", ["committed", "n20"])
+def test_core_and_sil_compile_with_clang(which, tmp_path):
+    inc = [headers()[which].parent, paths.CORE_SRC, SIL]
+    for src in [*sorted(paths.CORE_SRC.glob("*.c")), SIL / "rod_sil.c"]:
+        r = compile_c("clang", src, inc, ["-O2", "-pedantic"], tmp_path / (src.stem + ".o"))
+        assert r.returncode == 0 and not r.stderr, f"{src.name}: {r.stderr}"
 
 
 def test_current_header_compiles(tmp_path):

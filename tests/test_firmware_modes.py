@@ -1,4 +1,4 @@
-"""Firmware modes through the SIL library: power-on, swing-up (eq. 22 + kick), catch, balance, disarm."""
+"""Firmware modes through the SIL library: power-on, swing-up (energy pump + kick), catch, balance, disarm."""
 
 import math
 
@@ -60,7 +60,8 @@ def test_swing_up_pumps_with_the_sign_of_the_rate_inside_the_swing_angle(sil):
     assert u == pytest.approx(amplitude, rel=1e-6)
 
 
-def test_no_swing_torque_outside_the_swing_angle(sil):
+def test_no_swing_torque_outside_the_swing_angle():
+    sil = Sil(("swing_up.angle_deg=30.0",))  # the default pumps at every angle up to the catch
     swing = sil.p["swing_up"]["angle_deg"]
     beyond = count_of(math.radians(swing) + 0.1)
     sil.arm(2)

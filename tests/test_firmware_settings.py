@@ -30,11 +30,14 @@ def f32(x: float) -> float:
     return struct.unpack("<f", struct.pack("<f", x))[0]
 
 
+TWO_DEG = f32(math.radians(2.0))  # the smallest swing and catch angle (rodlink.toml codes.param)
+
 CASES = {
-    # param: (accepted values, refused values)
-    "SWING_AMPLITUDE": ([0.0, 0.05, f32(0.2)], [-0.001, 0.2001, 1.0, NAN, INF, -INF]),
-    "SWING_ANGLE": ([0.01, 1.0, f32(math.pi)], [0.0, -0.1, 3.1416, 4.0, NAN, INF]),
-    "CATCH_ANGLE": ([0.01, 0.5, 1.04], [0.0, -0.2, f32(math.radians(60.0)), 1.2, NAN, INF]),
+    # param: (accepted values, refused values); the ranges are rodlink.toml's, inclusive
+    "SWING_AMPLITUDE": ([f32(0.001), 0.05, f32(0.2)], [0.0, 0.0009, 1e-40, -0.001, 0.2001, 1.0, NAN, INF, -INF]),
+    "SWING_ANGLE": ([TWO_DEG, 1.0, f32(math.pi)], [0.0, 0.03, 1e-40, -0.1, 3.1416, 4.0, NAN, INF]),
+    "CATCH_ANGLE": ([TWO_DEG, 0.5, 1.04, f32(math.radians(60.0))],
+                    [0.0, 0.03, 1e-40, -0.2, 1.05, 1.2, NAN, INF]),
     "TELEMETRY_DECIMATION": ([1.0, 7.0, 1000.0], [0.0, 0.5, 2.5, 1001.0, -1.0, NAN, INF]),
     "HEARTBEAT_TIMEOUT": ([f32(0.05), 1.0, 10.0], [0.049, 10.01, 0.0, -1.0, NAN, INF]),
 }

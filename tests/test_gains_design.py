@@ -33,9 +33,11 @@ def test_sampled_design_stabilizes_the_sampled_loop(edges, rate):
     rho = sampled.spectral_radius(d.loop())
     assert rho < 1.0
     assert d.checks["closed_loop_spectral_radius"] == pytest.approx(rho)
-    # separation: the loop's eigenvalues are the controller's and the current-estimator's
+    # separation: the loop's eigenvalues are the controller's and the current-estimator's (its
+    # estimated base-torque disturbance included)
     ctrl = np.linalg.eigvals(d.Ad - d.Bd @ d.K)
-    obs = np.linalg.eigvals(d.Ad - d.L @ d.C @ d.Ad)
+    Ao, _, Co, _, Lo = d.observer_matrices()
+    obs = np.linalg.eigvals(Ao - Lo @ Co @ Ao)
     assert max(np.abs(ctrl).max(), np.abs(obs).max()) == pytest.approx(rho, rel=1e-6)
 
 
@@ -44,7 +46,7 @@ def test_paper_continuous_K_is_unstable_when_sampled(rate, radius):
     """Physics notes: spectral radius of Ad - Bd K for the paper's K on the bare Table I rod."""
     from rodgains.report import paper_continuous_sampled
 
-    d = design(load_params(overrides=[f"loop.rate_hz={rate}"]))
+    d = design(load_params(overrides=[f"loop.rate_hz={rate}", "rod.edges=5"]))  # Table I's N
     bare = paper_continuous_sampled(d, bare=True)
     assert bare["fastest_continuous_pole"] == pytest.approx(-2.3e4, rel=0.03)
     assert bare["state_feedback_radius"] == pytest.approx(radius, rel=0.05)
@@ -53,8 +55,9 @@ def test_paper_continuous_K_is_unstable_when_sampled(rate, radius):
 def test_filter_gain_is_the_current_estimate_form():
     from rodgains.design import weights
 
-    p = load_params()
+    p = load_params(overrides=["observer.process_noise_torque=0.0"])  # no disturbance state
     d = design(p)
+    assert d.Lw == 0.0
     _, _, W, V = weights(p, d.N)
     Wd = sampled.sampled_process_noise(d.A, W, d.dt)
     Vd = V / d.dt  # per-sample variance of a continuous intensity
@@ -67,7 +70,7 @@ def test_filter_gain_is_the_current_estimate_form():
 
 
 def test_sampled_cost_matches_brute_force_quadrature():
-    d = design(load_params())
+    d = design(load_params(overrides=["rod.edges=5"]))
     Q = np.diag([0.5] * 5 + [0.1] * 5)
     R = np.array([[1.0]])
     Qd, Rd, Nd = sampled.sampled_cost(d.A, d.B, Q, R, d.dt)
@@ -104,7 +107,7 @@ def test_unstable_design_is_refused_with_exit_3(tmp_path):
 
 def test_refused_bare_paper_design_reports_radius_20(tmp_path):
     r = rodctl("gains", "--set", "design.method=continuous", "--set", "motor.design_includes_motor=false",
-               *PAPER_WEIGHTS, "--header", str(tmp_path / "h.h"))
+               "--set", "rod.edges=5", *PAPER_WEIGHTS, "--header", str(tmp_path / "h.h"))  # Table I's N
     msg = one_line_error(r, 3)
     radius = float(msg.split("spectral radius ")[1].split()[0])
     assert radius == pytest.approx(20.1, rel=0.02)
@@ -192,7 +195,7 @@ def test_header_literals_are_all_float():
 
 SMOKE_C = r"""
 #include "rod_gains.h"
-#if ROD_GAINS_SCHEMA_VERSION != 1
+#if ROD_GAINS_SCHEMA_VERSION != 2
 #error "schema"
 #endif
 const float Ad[ROD_NX][ROD_NX] = ROD_AD_INIT;
@@ -237,7 +240,7 @@ def test_header_compiles_warning_free_for_host_and_cortex_m4f(cc, target, edges,
 
 def test_json_has_the_design_with_documented_shapes(tmp_path):
     out = tmp_path / "design.json"
-    r = rodctl("gains", "--json", str(out))
+    r = rodctl("gains", "--set", "rod.edges=5", "--json", str(out))
     assert r.returncode == 0, r.stderr
     j = json.loads(out.read_text())
     N = j["N"]
@@ -255,7 +258,7 @@ def test_json_has_the_design_with_documented_shapes(tmp_path):
 
 
 def test_report_lists_critical_lengths_margins_and_the_sampled_paper_gain():
-    r = rodctl("gains", "--report")
+    r = rodctl("gains", "--report", "--set", "rod.edges=5")  # Table I's N
     assert r.returncode == 0, r.stderr
     out = r.stdout
     assert "continuum (Greenhill, corrected eq. 23): 15.40 cm" in out

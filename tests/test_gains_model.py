@@ -95,7 +95,7 @@ def test_greenhill_length_for_table_I_is_154_mm():
 
 
 def test_nlink_critical_length_converges_to_continuum():
-    p = load_params()
+    p = load_params(overrides=["rod.edges=5"])  # Table I's N
     lc = greenhill_length(p)
     l5 = nlink_critical_length(p)
     l20 = nlink_critical_length(p, edges=20)

@@ -14,7 +14,7 @@ from rodctl.cli import flash as cmd_flash
 from rodctl.link import ports
 from rodctl.link import protocol as P
 from rodctl.cli.plot import PANELS, make_figure, shape_nodes
-from rodctl.logs.logfile import LogWriter, read_log, simulator_metadata
+from rodctl.logs import LogWriter, read_log, simulator_metadata
 
 
 def _teensies():
@@ -69,23 +69,8 @@ def test_a_port_without_the_firmware_is_named_as_such():
 
 # ---- build / flash ------------------------------------------------------------------------------
 
-def _no_teensy_platform() -> bool:
-    return not cmd_flash.platform_installed("teensy") and not cmd_flash.registry_reachable(timeout=2)
-
-
-needs_offline = pytest.mark.skipif(not _no_teensy_platform(), reason="the Teensy platform can be installed here")
-
-
-@needs_offline
-@pytest.mark.parametrize("command", [["build"], ["flash", "--upload-port", "/dev/ttyACM0"]])
-def test_build_and_flash_without_the_platform_is_one_clear_line(command):
-    header = (cmd_flash.paths.COMMITTED_HEADER).read_bytes()
-    r = run_rodctl(*command, timeout=60)
-    assert r.returncode == 1
-    line = _one_error_line(r)
-    assert line.startswith("rodctl: PlatformIO could not install platform teensy (no internet?)")
-    assert "pio pkg install -g -p teensy" in line
-    assert cmd_flash.paths.COMMITTED_HEADER.read_bytes() == header  # nothing touched before failing
+# Which branch build/flash takes (PlatformIO there or not, platform installed, registry reachable)
+# is tested in tests/test_flash_cli.py, by controlling what the code sees.
 
 
 def test_platformio_output_is_summarized_in_one_line():
@@ -100,13 +85,6 @@ def test_platform_names_from_platformio_ini_specs():
     assert cmd_flash.platform_name("teensy") == "teensy"
     assert cmd_flash.platform_name("platformio/teensy@^5.0.0") == "teensy"
     assert cmd_flash.platform_name("https://github.com/platformio/platform-teensy.git") == "teensy"
-
-
-def test_missing_environment_is_one_line(tmp_path):
-    (tmp_path / "platformio.ini").write_text("[env:uno]\nplatform = atmelavr\n")
-    r = run_rodctl("build", "--project-dir", str(tmp_path))
-    assert r.returncode == 1
-    assert _one_error_line(r) == f"rodctl: {tmp_path / 'platformio.ini'} has no [env:teensy35] (environments: uno)"
 
 
 # ---- plots --------------------------------------------------------------------------------------
@@ -134,13 +112,13 @@ def test_plot_writes_a_png_with_every_panel(tmp_path):
     fig = make_figure(*read_log(log))
     assert len(fig.axes) == len(PANELS) == 6
     assert [len(ax.lines) for ax in fig.axes[:4]][0] >= 5  # one line per angle estimate
-    shapes = [ln for ln in fig.axes[4].lines if len(ln.get_xdata()) == 6]
-    assert len(shapes) == 6  # six snapshots of the 5-edge rod (6 nodes)
+    shapes = [ln for ln in fig.axes[4].lines if ", t = " in ln.get_label()]
+    assert [ln.get_label().split(",")[0] for ln in shapes] == ["start", "end"]  # snapshots at events only
     out = tmp_path / "swing.png"
     r = run_rodctl("plot", str(log), "--out", str(out))
     assert r.returncode == 0, r.stderr
     assert out.exists() and out.stat().st_size > 20_000
-    assert r.stdout.startswith(f"wrote {out}: 2000 frames, panels: ")
+    assert r.stdout.startswith(f"wrote {out}: 2000 telemetry frames, panels: ")
 
 
 def test_shape_nodes_follow_the_convention():
@@ -167,7 +145,7 @@ def test_live_plot_on_a_headless_machine_is_a_clear_message():
     r = run_rodctl("plot", "--live", "--port", "sim://", env=env)
     assert r.returncode == 1
     line = _one_error_line(r)
-    assert line.startswith("rodctl: plot --live needs a display: no display (DISPLAY is not set).")
+    assert line.startswith("rodctl: the scope needs a display: no display (DISPLAY is not set).")
     assert "rodctl log --port sim:// --out run.csv" in line
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 import time
 
 import pytest
@@ -25,9 +26,15 @@ def session():
 def test_hello_identifies_the_firmware(session):
     h = session.hello
     assert (h.fw_major, h.fw_minor, h.fw_patch) >= (0, 1, 0)
-    assert h.n == 5
+    assert h.n == _default_edges()  # the controller's model order from the parameter file
     assert h.period_us == 1000
     assert bytes(h.header_sha256).hex() == _committed_sha()
+
+
+def _default_edges() -> int:
+    from rodgains.params import load_params
+
+    return load_params().N
 
 
 def _committed_sha() -> str:
@@ -36,11 +43,26 @@ def _committed_sha() -> str:
     return load_params().sha256()
 
 
+def _telemetry_times_us(session, frames: int, timeout: float = 30.0) -> list[int]:
+    """Device timestamps [us] of the next `frames` telemetry frames (the device's clock, not ours)."""
+    times = []
+
+    def listener(f, _t):
+        if f.type == P.MsgType.TELEMETRY:
+            times.append(f.time_us)
+
+    session.add_listener(listener, replay=False)
+    deadline = time.monotonic() + timeout
+    while len(times) < frames and time.monotonic() < deadline:
+        time.sleep(0.02)
+    session.remove_listener(listener)
+    assert len(times) >= frames
+    return times[:frames]
+
+
 def test_telemetry_arrives_at_1khz_with_contiguous_sequence(session):
-    n0, t0 = session.telemetry_seen, time.monotonic()
-    time.sleep(1.0)
-    rate = (session.telemetry_seen - n0) / (time.monotonic() - t0)
-    assert 900 <= rate <= 1100
+    times = _telemetry_times_us(session, 500)
+    assert set(b - a for a, b in zip(times, times[1:])) == {1000}  # every control step, by the device's clock
     assert session.seq_gaps == 0 and session.counters()["seq_gaps"] == 0
     assert session.counters()["errors"] == 0
 
@@ -49,28 +71,70 @@ def test_status_command_prints_hello_and_one_telemetry(capsys):
     assert cli.main(["status", "--port", "sim://"]) == 0
     out = capsys.readouterr().out
     assert "firmware    0.1.0" in out
-    assert "N=5 at 1000 Hz" in out
+    assert f"N={_default_edges()} at 1000 Hz" in out
     assert "mode        DISARMED" in out
-    assert "theta_hat [0.0, 0.0, 0.0, 0.0, 0.0] deg" in out
+    assert "theta_hat [-180.0, -180.0," in out and "] deg from upright" in out  # hanging: 180 from upright
 
 
-def test_set_out_of_range_is_refused_by_the_device_with_the_range(capsys):
-    assert cli.main(["set", "catch_angle_deg=200", "--port", "sim://"]) == 1
+def test_set_out_of_range_is_refused_with_the_range(capsys):
+    assert cli.main(["set", "catch_angle_deg=70", "--port", "sim://"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == ("rodctl: device refused catch_angle_deg=200: allowed 0 < catch_angle_deg < 60 deg "
+    assert err == ("rodctl: catch_angle_deg=70 out of range: allowed 2 <= catch_angle_deg <= 60 deg "
                    "(the balance angle limit, at most 90 deg)")
 
 
 @pytest.mark.parametrize("text, allowed", [
-    ("swing_amplitude=0.5", "0 <= swing_amplitude <= 0.2 N m"),
-    ("swing_angle_deg=190", "0 < swing_angle_deg <= 180 deg"),
+    ("catch_angle_deg=1e42", "2 <= catch_angle_deg <= min(90, the balance angle limit) deg"),
+    ("catch_angle_deg=1e-40", "2 <= catch_angle_deg"),
+    ("swing_amplitude=0", "0.001 <= swing_amplitude <= the firmware's torque ceiling N m"),
+    ("swing_angle_deg=190", "2 <= swing_angle_deg <= 180 deg"),
+    ("swing_angle_deg=1", "2 <= swing_angle_deg <= 180 deg"),
     ("telemetry_decimation=2.5", "integer 1 <= telemetry_decimation <= 1000"),
     ("heartbeat_timeout=20", "0.05 <= heartbeat_timeout <= 10 s"),
 ])
-def test_every_setting_reports_its_range_when_refused(session, text, allowed):
-    setting, value = parse_assignment(text)
-    with pytest.raises(UserError, match=f"allowed {allowed}"):
+def test_every_setting_has_a_physical_range_checked_before_sending(text, allowed):
+    with pytest.raises(UserError, match=re.escape(f"out of range: allowed {allowed}")) as e:
+        parse_assignment(text)
+    assert e.value.exit_code == 2
+
+
+def test_device_ceiling_comes_from_the_hello(session):
+    setting, value = parse_assignment("swing_amplitude=0.5")
+    with pytest.raises(UserError, match="allowed 0.001 <= swing_amplitude <= 0.2 N m"):
         session.set(setting, value)
+
+
+def test_the_device_refuses_what_the_host_refuses(session):
+    """The firmware checks the same ranges (rodlink.toml): send past the host's check."""
+    for setting, value in [(SETTINGS["catch_angle_deg"], 1.0), (SETTINGS["swing_angle_deg"], 1.0),
+                           (SETTINGS["swing_amplitude"], 0.0005), (SETTINGS["catch_angle_deg"], 1e30)]:
+        with pytest.raises(UserError, match="out of range"):
+            session.command(P.Set(setting.param, setting.to_device(value)), what="raw set")
+    for setting, value in [(SETTINGS["catch_angle_deg"], 2.0), (SETTINGS["swing_angle_deg"], 2.0)]:
+        session.command(P.Set(setting.param, setting.to_device(value)), what="raw set")  # the bounds themselves
+
+
+def test_set_applies_all_or_none(session, capsys):
+    before = session.request_hello()
+    with pytest.raises(UserError, match="catch_angle_deg=100 out of range"):
+        session.set_all([parse_assignment("swing_amplitude=0.15"), (SETTINGS["catch_angle_deg"], 100.0)])
+    after = session.request_hello()
+    assert after.swing_amplitude == before.swing_amplitude  # the first was not applied
+
+
+def test_set_rolls_back_when_the_device_refuses_a_later_one(session):
+    """A bound only the device knows (the angle limit without the design): undo what was applied."""
+    before = session.request_hello()
+    with pytest.raises(UserError, match="device refused catch_angle_deg=80"):
+        session.set_all([(SETTINGS["swing_amplitude"], 0.15), (SETTINGS["catch_angle_deg"], 80.0)])
+    after = session.request_hello()
+    assert after.swing_amplitude == before.swing_amplitude
+    assert after.catch_angle == before.catch_angle
+
+
+def test_set_command_applies_nothing_when_one_value_is_bad(capsys):
+    assert cli.main(["set", "swing_amplitude=0.15", "catch_angle_deg=100", "--port", "sim://"]) == 2
+    assert "catch_angle_deg=100 out of range" in capsys.readouterr().err
 
 
 def test_set_round_trip_changes_what_the_device_reports(session):
@@ -83,11 +147,9 @@ def test_set_round_trip_changes_what_the_device_reports(session):
 
 def test_telemetry_decimation_slows_the_telemetry(session):
     session.set("telemetry_decimation", 10)
-    time.sleep(0.05)
-    n0, t0 = session.telemetry_seen, time.monotonic()
-    time.sleep(1.0)
-    rate = (session.telemetry_seen - n0) / (time.monotonic() - t0)
-    assert 85 <= rate <= 115
+    session.request_hello()  # frames after this ack come at the new rate
+    times = _telemetry_times_us(session, 50)
+    assert set(b - a for a, b in zip(times, times[1:])) == {10_000}  # every 10th step
 
 
 def test_set_command_prints_the_new_value(capsys):
@@ -98,7 +160,7 @@ def test_set_command_prints_the_new_value(capsys):
 
 
 def test_unknown_setting_names_the_choices(capsys):
-    assert cli.main(["set", "gain=3", "--port", "sim://"]) == 1
+    assert cli.main(["set", "gain=3", "--port", "sim://"]) == 2
     err = capsys.readouterr().err
     assert "unknown setting 'gain'" in err
     for name in SETTINGS:
@@ -137,11 +199,11 @@ def test_silent_host_faults_and_arm_in_fault_is_refused_naming_clear_fault(sessi
     session.arm(P.ArmMode.BALANCE)
     with session.heartbeat_paused():
         t0 = time.monotonic()
-        while session.telemetry.mode != P.Mode.FAULT and time.monotonic() - t0 < 2:
+        while session.telemetry.mode != P.Mode.FAULT and time.monotonic() - t0 < 5:
             time.sleep(0.01)
         tripped = time.monotonic() - t0
     assert (session.telemetry.mode, session.telemetry.reason) == (P.Mode.FAULT, P.Reason.HEARTBEAT)
-    assert 0.35 <= tripped <= 0.8
+    assert tripped < 5.0  # trips at all; its timing, by the device's clock, is in test_firmware_safety.py
     with pytest.raises(UserError) as e:
         session.arm(P.ArmMode.SWING_UP)
     assert str(e.value) == "device is in FAULT (heartbeat lost): run `rodctl clear-fault`"
@@ -160,9 +222,9 @@ def test_two_sim_ports_are_two_independent_boards():
 
 
 def test_sim_url_options_choose_the_plant():
-    with Session("sim://?plant=der&edges=8") as s:
-        assert s.ser.device.plant.N == 8 and s.ser.device.kind == "der"
-        assert s.hello.n == 5  # the controller's model keeps the parameters' N
+    with Session("sim://?plant=der&edges=12") as s:
+        assert s.ser.device.plant.N == 12 + 1 and s.ser.device.kind == "der"  # 12 edges beyond the hub edge
+        assert s.hello.n == _default_edges()  # the controller's model keeps the parameters' N
         counts = []
         s.add_listener(lambda f, _t: counts.append(f.msg.encoder_count) if f.type == P.MsgType.TELEMETRY else None)
         s.arm(P.ArmMode.SWING_UP)
@@ -196,7 +258,8 @@ def test_console_session_from_a_script():
     assert r.returncode == 0, r.stderr
     out = r.stdout
     assert "mode DISARMED;" in out
-    assert "error: device refused catch_angle_deg=200: allowed 0 < catch_angle_deg < 60 deg" in out
+    assert ("error: catch_angle_deg=200 out of range: allowed 2 <= catch_angle_deg <= "
+            "min(90, the balance angle limit) deg") in out
     assert "armed balance: mode CATCH" in out
     assert "mode CATCH;" in out
     assert "error: unknown command 'fly'" in out

@@ -11,7 +11,7 @@ import pytest
 from host_tools import Listener, run_rodctl, sim_device, start_rodctl
 
 from rodctl.link import protocol as P
-from rodctl.logs.logfile import read_log, telemetry
+from rodctl.logs import read_log, telemetry
 
 pytestmark = pytest.mark.skipif(not hasattr(__import__("os"), "openpty"), reason="needs pseudo-terminals")
 
@@ -65,7 +65,9 @@ def test_sigkill_of_log_leaves_a_readable_csv_and_a_board_that_disarms_itself(tm
         print(f"\nFAULT (HEARTBEAT) seen {delay:.3f} s after the SIGKILL")
         assert frame.msg.reason == P.Reason.HEARTBEAT
         assert not frame.msg.flags & P.TelemetryFlag.DRIVER_ENABLED
-        assert 0.3 <= delay <= 0.5 + 0.3  # the 0.5 s watchdog (the last heartbeat was <= 0.1 s before the kill)
+        # It trips by itself (within the listener's 3 s); when, by the device's own clock, is pinned
+        # in test_firmware_safety.py: wall-clock delays here depend on the machine's load.
+        assert delay < 3.5
         # a user reconnecting sees why it stopped
         r = run_rodctl("status", "--port", pts)
         assert "mode        FAULT (heartbeat lost): run `rodctl clear-fault`" in r.stdout, (r.stdout, r.stderr)
@@ -73,7 +75,7 @@ def test_sigkill_of_log_leaves_a_readable_csv_and_a_board_that_disarms_itself(tm
     meta, data = read_log(out)  # every complete row parses
     assert meta["incomplete_rows"] == "0"  # whole rows only: the writer never leaves half a line
     assert len(data) >= 1500
-    assert np.array_equal(data["seq_count"], np.arange(data["seq_count"][0], data["seq_count"][0] + len(data)))
+    assert np.all(np.diff(data["seq_count"]) >= 1) and np.all(np.diff(data["time_s"]) > 0)
     assert "closed_utc" not in meta  # no clean close happened
 
 
@@ -100,12 +102,17 @@ def test_ctrl_c_of_log_leaves_a_valid_file_and_disarms(tmp_path):
             listener.close()
         assert frames and all((f.msg.mode, f.msg.reason) == (P.Mode.DISARMED, P.Reason.HOST) for f in frames)
 
-    meta, data = read_log(out)
+    log = read_log(out)
+    meta, data = log
     assert meta["end"] == "Ctrl-C" and meta["incomplete_rows"] == "0"
-    assert int(meta["frames"]) == len(data) == int(meta["rows"])
+    ev = log.events
+    frame_events = ev[np.isin(ev["event_name"], ["HELLO", "ACK"])]
+    assert int(meta["frames"]) == len(data) + len(frame_events) + int(meta["heartbeat_acks"]) and \
+        int(meta["rows"]) == len(data)
     assert meta["seq_gaps"] == "0" and meta["device_frames_dropped"] == "0"
-    assert np.array_equal(data["seq_count"], np.arange(data["seq_count"][0], data["seq_count"][0] + len(data)))
-    acks = [a for a in data[data["type_name"] == "ACK"]["info_text"] if not a.startswith("ACK HEARTBEAT")]
+    seqs = np.sort(np.concatenate([data["seq_count"], frame_events["seq_count"]]))
+    assert len(seqs) == len(set(seqs)) and np.all(np.diff(data["time_s"]) > 0)
+    acks = [a for a in ev[ev["event_name"] == "ACK"]["info_text"] if not a.startswith("ACK HEARTBEAT")]
     assert acks[0].startswith("ACK HELLO_REQUEST ") and acks[1].startswith("ACK ARM ") and acks[1].endswith(" OK")
     assert acks[-1].startswith("ACK DISARM ") and acks[-1].endswith(" OK")  # the disarm is in the log
 
@@ -126,6 +133,8 @@ def test_board_lost_mid_log_ends_with_one_line_and_a_closed_file(tmp_path):
     lines = err.strip().splitlines()
     assert lines[-1].startswith(f"rodctl: {pts}: device disconnected")
     assert "Traceback" not in err
-    meta, data = read_log(out)
+    log = read_log(out)
+    meta, data = log
     assert meta["end"] == "error" and "disconnected" in meta
-    assert int(meta["frames"]) == len(data)  # everything received is in the file
+    frame_events = np.count_nonzero(np.isin(log.events["event_name"], ["HELLO", "ACK"]))
+    assert int(meta["frames"]) == len(data) + frame_events + int(meta["heartbeat_acks"])  # everything received

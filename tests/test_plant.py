@@ -192,7 +192,7 @@ def test_plant_options():
     assert (plant.config.J, plant.config.b) == (0.0, 0.0)
     phys = Plant(P, edges=5)
     assert phys.config.J == pytest.approx(5e-7 * 20.4**2) and phys.config.b == 5e-4  # the physical motor
-    assert Plant(P).N == P.N == 5
+    assert Plant(P).N == P.N == P["rod"]["edges"]
     with pytest.raises(ValueError):
         Plant(P, kind="soft")
     with pytest.raises(ValueError):

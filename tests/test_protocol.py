@@ -54,7 +54,12 @@ class Ack(C.Structure):
 
 class Command(C.Structure):
     _fields_ = [("type", C.c_uint8), ("seq", C.c_uint32), ("time_us", C.c_uint32), ("status", C.c_uint8),
-                ("arm_mode", C.c_uint8), ("param", C.c_uint8), ("value", C.c_float)]
+                ("arm_mode", C.c_uint8), ("param", C.c_uint8), ("value", C.c_float),
+                ("excitation", C.c_uint8), ("seed", C.c_uint16), ("amplitude", C.c_float), ("duration", C.c_float),
+                ("shape1", C.c_float), ("shape2", C.c_float)]
+
+
+IDENTIFY_FIELDS = ("excitation", "seed", "amplitude", "duration", "shape1", "shape2")
 
 
 class Rx(C.Structure):
@@ -112,7 +117,8 @@ def c_encode(lib, case, cap=None) -> bytes:
         k = lib.rod_proto_encode_ack(C.byref(Ack(**f)), case["seq"], case["time_us"], out, cap)
     else:
         m = Command(type=t, seq=case["seq"], time_us=case["time_us"], arm_mode=f.get("mode", 0),
-                    param=f.get("param", 0), value=f.get("value", 0.0))
+                    param=f.get("param", 0), value=f.get("value", 0.0),
+                    **{k: f[k] for k in IDENTIFY_FIELDS if k in f})
         k = lib.rod_proto_encode_command(C.byref(m), out, cap)
     return out.raw[:k]
 
@@ -144,6 +150,8 @@ def c_decode(lib, wire: bytes):
         d = {"mode": m.arm_mode} if p.type == P.MsgType.ARM else {}
         if p.type == P.MsgType.SET:
             d = {"param": m.param, "value": m.value}
+        if p.type == P.MsgType.IDENTIFY:
+            d = {k: getattr(m, k) for k in IDENTIFY_FIELDS}
     return p, d
 
 
@@ -297,7 +305,8 @@ def test_python_encoders_reject_bad_messages():
 
 def test_enums_match_the_definition():
     assert P.MsgType.TELEMETRY == 0x01 and P.MsgType.HELLO_REQUEST == 0x15
-    assert [m.name for m in P.Mode] == ["DISARMED", "BALANCE", "SWING_UP", "FAULT", "CATCH"]
+    assert [m.name for m in P.Mode] == ["DISARMED", "BALANCE", "SWING_UP", "FAULT", "CATCH", "IDENTIFY"]
+    assert P.MsgType.IDENTIFY == 0x16 and [e.name for e in P.Excitation] == ["CHIRP", "PRBS", "STEPS", "RELEASE"]
     assert P.Reason.OVERRUN == 7 and P.AckResult.BUSY == 5 and P.Param.HEARTBEAT_TIMEOUT == 5
     assert P.TelemetryFlag.HEARTBEAT_OK == 4
     assert P.PARAM_INFO[P.Param.TELEMETRY_DECIMATION].integer
@@ -624,14 +633,7 @@ def test_codec_compiles_for_cortex_m4_without_double(tmp_path):
     assert "__aeabi_d" not in nm and "malloc" not in nm  # no double arithmetic, no allocation
 
 
-# ---- speed ---------------------------------------------------------------------------------------
-
-def test_python_decodes_at_least_100k_telemetry_frames_per_second():
-    from rodctl.bench.protocol import measure_decode_rate
-
-    rate = measure_decode_rate(seconds=0.6, runs=3)
-    assert rate >= 100_000, f"{rate:,.0f} frames/s"
-
+# ---- cost on the M4 (instruction counts, not wall-clock: decode speed is in `rodctl bench`) --------
 
 def test_telemetry_encode_fits_the_m4_budget(tmp_path):
     from rodctl.bench.m4 import ICOUNT as ICOUNT_TOOL  # the same search as `rodctl bench`

@@ -1,4 +1,7 @@
-"""The paper's scenarios and the robustness checks, run on the firmware's own C against the plant."""
+"""The paper's scenarios and the robustness checks, run on the firmware's own C against the plant.
+
+Testbed scenarios run on the faithful plant ([plant] table); every matrix case is asserted in
+tests/test_robustness_matrix.py, so the robust-* scenarios here are only sampled."""
 
 import math
 import subprocess
@@ -26,11 +29,12 @@ def test_swing_up_catches_and_settles_on_the_testbed(outcomes):
     o = outcome("swingup", outcomes)
     m = o.metrics["firmware"]
     assert o.passed
-    assert 1.5 < m["swingup_s"] < 5.0  # 0.05 N m pumps the rod up in a few swings
+    assert 0.5 < m["swingup_s"] < 5.0  # 0.05 N m of energy pumping: about one swing
     assert m["settle_s"] < 2.0  # after the catch
-    assert m["final_dev_deg"] < 0.5
+    assert m["final_dev_deg"] < 1.0
     assert m["peak_torque_Nm"] <= 0.2 + 1e-6  # the torque limit holds
-    assert m["est_rms_deg"] < 0.5
+    assert m["est_rms_deg"] < 1.0
+    assert "hub" in o.traces[0].plant  # the faithful plant ran, not the design model
 
 
 def test_fig3_swings_up_with_the_papers_amplitude_on_the_papers_model(outcomes):
@@ -46,7 +50,7 @@ def test_fig3_swings_up_with_the_papers_amplitude_on_the_papers_model(outcomes):
 
 
 def test_friction_stops_the_papers_amplitude_on_the_testbed():
-    """Why the default amplitude is 0.05 N m: with the gearbox friction 0.01 N m never reaches the catch."""
+    """Why the default amplitude is 0.05 N m: against the gearbox friction 0.01 N m never reaches the catch."""
     p = load_params(overrides=["swing_up.amplitude=0.01"])
     tr = firmware_run("x", p, p, theta0=0.0, arm_mode=2, seconds=12.0)
     assert not np.any(tr.mode == 1)
@@ -58,8 +62,8 @@ def test_balance_from_30_deg_with_quantization_and_torque_limit(outcomes):
     m = o.metrics["firmware"]
     assert o.passed
     assert m["settle_s"] < 2.0
-    assert m["final_dev_deg"] < 0.5
-    assert m["peak_torque_Nm"] == pytest.approx(0.2, abs=1e-3)  # it saturates on the way
+    assert m["final_dev_deg"] < 1.0
+    assert m["peak_torque_Nm"] == pytest.approx(0.2, abs=0.01)  # it saturates on the way
     tr = o.traces[0]
     assert np.all(tr.count == np.round(tr.count))  # the firmware only ever saw whole counts
     ripple = np.sqrt(np.mean(tr.torque_cmd[tr.t > 4.0] ** 2))
@@ -93,22 +97,14 @@ def test_fig4_feedback_balances_rods_beyond_the_critical_length(outcomes):
     assert above_clamped["final_dev_deg"] > 30  # above it buckles under its own weight
 
 
-@pytest.mark.parametrize("name,settle_max,final_max", [
-    ("robust-E+15", math.inf, 2.0),
-    ("robust-E-15", math.inf, 2.0),
-    ("robust-rho+15", 4.0, 0.5),
-    ("robust-rho-15", 4.0, 0.5),
-    ("robust-n20", 4.0, 1.0),
-    ("robust-der20", 4.0, 1.0),
-])
-def test_robustness_cases_stay_balanced(name, settle_max, final_max, outcomes):
+@pytest.mark.parametrize("name", ["robust-E-15", "robust-inext20"])
+def test_robustness_scenarios_run_both_tasks_of_their_matrix_case(name, outcomes):
     o = outcome(name, outcomes)
-    m = o.metrics["firmware"]
     assert o.passed
-    assert not o.traces[0].fell
-    assert m["final_dev_deg"] < final_max
-    if math.isfinite(settle_max):
-        assert m["settle_s"] < settle_max
+    assert [tr.label for tr in o.traces] == ["balance", "swingup"]
+    for tr in o.traces:
+        assert not tr.fell and o.metrics[tr.label]["final_dev_deg"] < 3.0
+    assert "inextensible, 20 edges" in o.traces[0].plant or name != "robust-inext20"
 
 
 def test_a_design_that_ignores_the_motor_fails_on_the_testbed(outcomes):
@@ -121,7 +117,7 @@ def test_a_design_that_ignores_the_motor_fails_on_the_testbed(outcomes):
 
 
 def test_sim_writes_a_device_format_log_and_a_figure(tmp_path):
-    from rodctl.logs import logfile
+    from rodctl import logs as logfile
 
     r = subprocess.run([sys.executable, "-m", "rodctl.cli", "sim", "--scenario", "balance", "--duration", "2",
                         "--plot", str(tmp_path / "b.png"), "--log", str(tmp_path / "b.csv")],
@@ -131,10 +127,11 @@ def test_sim_writes_a_device_format_log_and_a_figure(tmp_path):
     meta, data = logfile.read_log(tmp_path / "b.csv")
     assert len(data) == 2000  # one telemetry row per 1 ms period
     assert np.all(np.diff(data["seq_count"]) == 1)
-    assert int(meta["n_edges"]) == 5 and meta["params_sha256"] == load_params().sha256()
+    p = load_params()
+    assert int(meta["n_edges"]) == p.N and meta["params_sha256"] == p.sha256()
     assert (tmp_path / "b.png").stat().st_size > 10_000
     truth = np.loadtxt(tmp_path / "b.truth.csv", delimiter=",", skiprows=1)
-    assert truth.shape == (2000, 6)
+    assert truth.shape == (2000, 1 + 1 + p["plant"]["edges"])  # time, the hub, the plant's edges
     # the same plot command that reads device logs reads the simulator's
     r = subprocess.run([sys.executable, "-m", "rodctl.cli", "plot", str(tmp_path / "b.csv"), "--out",
                         str(tmp_path / "p.png")], capture_output=True, text=True)
@@ -144,7 +141,7 @@ def test_sim_writes_a_device_format_log_and_a_figure(tmp_path):
 
 def test_sim_rejects_bad_input_with_one_line():
     for args, needle in ((["--scenario", "fig9"], "unknown scenario 'fig9'"),
-                         (["--edges", "1"], "--edges 1"), (["--plant", "rigid"], "--plant rigid")):
+                         (["--edges", "1"], "plant.edges"), (["--plant", "rigid"], "plant.model")):
         r = subprocess.run([sys.executable, "-m", "rodctl.cli", "sim", *args, "--no-log", "--no-plot"],
                            capture_output=True, text=True)
         assert r.returncode != 0 and needle in r.stderr and "Traceback" not in r.stderr

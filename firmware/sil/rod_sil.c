@@ -55,6 +55,15 @@ int rod_sil_arm_result(int mode)
     return rod_control_arm(&sil.control, (uint8_t)mode);
 }
 
+int rod_sil_identify(int excitation, float amplitude, float duration, float shape1, float shape2, int seed)
+{
+    if (excitation < 0 || excitation > 255 || seed < 0 || seed > 0xFFFF) {
+        return ROD_ACK_BAD_VALUE;
+    }
+    rod_identify_request_t req = {(uint8_t)excitation, (uint16_t)seed, amplitude, duration, shape1, shape2};
+    return rod_control_identify(&sil.control, &req);
+}
+
 void rod_sil_arm(int mode)
 {
     (void)rod_sil_arm_result(mode);

@@ -6,7 +6,7 @@
  * device (rod_dev_*) independently.
  *
  * Mode codes (rod_sil_status, rod_dev_status):
- *   0 DISARMED  1 BALANCE  2 SWING_UP  3 FAULT  4 CATCH
+ *   0 DISARMED  1 BALANCE  2 SWING_UP  3 FAULT  4 CATCH  5 IDENTIFY
  * Reason codes (rod_sil_reason, rod_dev_reason):
  *   0 NONE  1 HOST  2 ANGLE_LIMIT  3 SPEED_LIMIT  4 DRIVER_FAULT  5 HEARTBEAT  6 NON_FINITE
  *   7 OVERRUN
@@ -57,6 +57,12 @@ ROD_SIL_API float rod_sil_rate(void);               /* measured base rate of the
 ROD_SIL_API int rod_sil_set(int param, float value);
 ROD_SIL_API int rod_sil_clear_fault(void);
 ROD_SIL_API int rod_sil_arm_result(int mode);       /* rod_sil_arm that returns the ack code */
+/* IDENTIFY as the host sends it (from DISARMED): excitation 1 chirp, 2 PRBS, 3 steps, 4 release;
+ * amplitude [N m], duration [s], shape1 / shape2 as in rodlink.toml (chirp f0 / f1 [Hz], PRBS
+ * bit time [s], step hold [s], release pulse [s]); seed = PRBS LFSR start state. Returns the ack
+ * code; mode 5 (IDENTIFY) until the excitation ends, then 0 (DISARMED). */
+ROD_SIL_API int rod_sil_identify(int excitation, float amplitude, float duration, float shape1, float shape2,
+                                 int seed);
 /* Test hook: poisons the balance estimate with a NaN (the next BALANCE step must trip). */
 ROD_SIL_API void rod_sil_inject_nan(void);
 

@@ -15,7 +15,7 @@ import numpy as np
 from .design import Design
 
 # Bump when the macro set or its meaning changes; firmware/src/core/rod_config.h checks it.
-HEADER_SCHEMA_VERSION = 1
+HEADER_SCHEMA_VERSION = 2
 DEFAULT_HEADER = Path("firmware/include/rod_gains.h")
 
 
@@ -48,6 +48,16 @@ def rate_filter_gains(bandwidth_hz: float, dt: float) -> tuple[float, float]:
     """
     wn = 2.0 * math.pi * bandwidth_hz
     return 2.0 * wn * dt, wn * wn * dt
+
+
+def pendulum_frequency(p) -> float:
+    """Small-swing frequency of the rod hanging as a rigid body on the design's motor [rad/s]:
+    omega0^2 = m g (L / 2) / (J + m L^2 / 3)."""
+    r = p["rod"]
+    m = r["density"] * r["width"] * r["thickness"] * r["length"]
+    L = r["length"]
+    w = math.sqrt(m * r["gravity"] * 0.5 * L / (p.design_base_inertia + m * L * L / 3.0))
+    return max(w, 1e-3)  # no gravity: no pendulum; the firmware divides by it
 
 
 def header_text(d: Design, command: str) -> str:
@@ -86,8 +96,14 @@ def header_text(d: Design, command: str) -> str:
         ("ROD_TORQUE_MAX_NM", f32(p.torque_max), "|torque| ceiling at the output [N m]"),
         ("ROD_DUTY_MAX", f32(drv["max_duty"]), "|duty| ceiling [-]"),
         ("ROD_PWM_FREQUENCY_HZ", str(int(drv["pwm_frequency_hz"])), "PWM carrier [Hz]"),
+        ("ROD_COULOMB_COMP_NM", f32(p["lqr"]["friction_compensation"]),
+         "balance adds this in the direction of the estimated base rate [N m]"),
         ("ROD_SWING_AMPLITUDE_NM", f32(swing["amplitude"]), "u_swing of eq. (22) [N m]"),
-        ("ROD_SWING_ANGLE_RAD", f32(deg(swing["angle_deg"])), "theta_swing of eq. (22) [rad]"),
+        ("ROD_SWING_ANGLE_RAD", f32(deg(swing["angle_deg"])), "pump only within this of hanging [rad]"),
+        ("ROD_SWING_OMEGA0_RAD_S", f32(pendulum_frequency(p)), "rigid rod + motor pendulum frequency [rad/s]"),
+        ("ROD_SWING_ENERGY_TARGET", f32(2.0 * swing["energy_target"]), "pump toward this energy (2 = upright) [-]"),
+        ("ROD_SWING_RATE_LP_K", f32(1.0 - math.exp(-2 * math.pi * swing["rate_filter_hz"] * d.dt)),
+         f"swing-up rate low-pass, {swing['rate_filter_hz']:g} Hz, per period [-]"),
         ("ROD_CATCH_ANGLE_RAD", f32(deg(swing["catch_angle_deg"])), "switch to balance within this of upright [rad]"),
         ("ROD_ANGLE_LIMIT_RAD", f32(deg(safety["angle_limit_deg"])), "balance disarms beyond this from upright [rad]"),
         ("ROD_SPEED_LIMIT_RAD_S", f32(safety["speed_limit"]), "disarm beyond this base speed [rad/s]"),
@@ -119,6 +135,7 @@ def header_text(d: Design, command: str) -> str:
         f"#define ROD_BD_INIT {_vector(d.Bd)}",
         f"#define ROD_K_INIT {_vector(d.K)}",
         f"#define ROD_L_INIT {_vector(d.L)}",
+        f"#define ROD_L_DISTURBANCE {f32(d.Lw)}  /* gain of the base-torque disturbance estimate w [N m/rad]; u = -K z - w */",
         "",
         "#endif /* ROD_GAINS_H */",
         "",

@@ -9,6 +9,7 @@ Firmware loop (current-estimate form), all in deviation z = x - x_upright:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg as sla
@@ -43,8 +44,32 @@ def continuous_gains(A, B, C, Q, R, W, V) -> tuple[np.ndarray, np.ndarray]:
     return K, L
 
 
+class StateSpaces(NamedTuple):
+    """python-control models of a Design (see Design.to_statespace)."""
+
+    open_loop: object  # control.StateSpace, continuous
+    open_loop_sampled: object  # control.StateSpace, dt = the loop period
+    closed_loop: object  # control.StateSpace, dt = the loop period
+
+
 @dataclass
 class Design:
+    """The gains the firmware runs, and the models they were designed on (from `design(params)`).
+
+    Conventions: state x = [theta_1..theta_N, dtheta_1..dtheta_N] in deviation from upright
+    (z = x - x_upright) [rad, rad/s], theta_i the absolute angle of edge i (pi upright); input u =
+    base torque at the output shaft [N m]; measurement y = theta_1 - pi [rad] from the encoder.
+    Shapes (n = 2N states): A, Ad (n, n); B, Bd (n, 1); C (1, n); K (1, n) with u = -K z (- w);
+    L (n, 1), the current-estimate observer gain z = z_pred + L (y - C z_pred); Lw the gain of
+    the estimated base-torque disturbance w (0: none).
+
+    Attributes: params (Params), rod (RodModel of the design), dt (loop period [s]), A, B
+    (continuous linearization about upright), Ad, Bd (zero-order hold at dt), K, L (the sampled
+    gains, or the continuous K when params design.method = "continuous"), K_continuous and
+    L_continuous (the paper's continuous design, for reference), method, observer_form
+    ("current"), checks (controllability, observability, closed_loop_spectral_radius, ...).
+    """
+
     params: Params
     rod: RodModel
     dt: float
@@ -60,13 +85,62 @@ class Design:
     method: str
     observer_form: str = OBSERVER_FORM
     checks: dict = field(default_factory=dict)
+    Lw: float = 0.0  # gain of the estimated base-torque disturbance w [N m/rad]; u = -K z - w
 
     @property
     def N(self) -> int:
         return self.rod.N
 
-    def loop(self, actuator_gain: complex = 1.0) -> np.ndarray:
-        return sampled.closed_loop(self.Ad, self.Bd, self.C, self.K, self.L, actuator_gain=actuator_gain)
+    def observer_matrices(self):
+        """(Ao, Bo, Co, K, L) of the firmware's estimator with the disturbance state w appended:
+        z_pred = Ad z + Bd (u_prev + w), w_pred = w; u = -K z - w."""
+        n = 2 * self.N
+        Ao = np.zeros((n + 1, n + 1))
+        Ao[:n, :n] = self.Ad
+        Ao[:n, n:] = self.Bd
+        Ao[n, n] = 1.0
+        Bo = np.vstack([self.Bd, [[0.0]]])
+        Co = np.hstack([self.C, [[0.0]]])
+        Ko = np.hstack([self.K, [[1.0]]])
+        Lo = np.vstack([self.L, [[self.Lw]]])
+        return Ao, Bo, Co, Ko, Lo
+
+    def loop(self, actuator_gain: complex = 1.0, Ad=None, Bd=None) -> np.ndarray:
+        """The sampled loop: plant (Ad, Bd; default the design model) with the firmware's estimator."""
+        if self.Lw == 0.0:  # no disturbance state: w stays 0 (its eigenvalue 1 is not part of the loop)
+            return sampled.closed_loop(self.Ad if Ad is None else Ad, self.Bd if Bd is None else Bd, self.C, self.K,
+                                       self.L, Ad_obs=self.Ad, Bd_obs=self.Bd, actuator_gain=actuator_gain)
+        Ao, Bo, Co, Ko, Lo = self.observer_matrices()
+        return sampled.closed_loop(self.Ad if Ad is None else Ad, self.Bd if Bd is None else Bd, self.C, Ko, Lo,
+                                   Ad_obs=Ao, Bd_obs=Bo, actuator_gain=actuator_gain, C_obs=Co)
+
+    def to_statespace(self) -> StateSpaces:
+        """python-control StateSpace models: (open_loop, open_loop_sampled, closed_loop).
+
+        open_loop: dz/dt = A z + B u, y = C z (continuous; input torque [N m], output theta_1 - pi [rad]).
+        open_loop_sampled: the same held for dt (Ad, Bd, C; dt = the loop period [s]).
+        closed_loop: the firmware's sampled loop with its observer and LQR, state [z_k, z_hat_k]
+        (plus w_hat with a disturbance estimate) after the measurement update; input a disturbance
+        torque d [N m] added to the command and held for one period; outputs [theta_1 - pi [rad],
+        commanded torque u [N m]]. Its poles are Design.loop()'s eigenvalues (inside the unit circle).
+        """
+        import control
+
+        n = self.A.shape[0]
+        names = [f"theta_{i}" for i in range(1, self.N + 1)] + [f"dtheta_{i}" for i in range(1, self.N + 1)]
+        ol = control.ss(self.A, self.B, self.C, np.zeros((1, 1)), inputs=["torque_Nm"], outputs=["theta_1"],
+                        states=names, name="rod_open_loop")
+        ols = control.ss(self.Ad, self.Bd, self.C, np.zeros((1, 1)), self.dt, inputs=["torque_Nm"],
+                         outputs=["theta_1"], states=names, name="rod_open_loop_sampled")
+        Lo, Ko, hats = self.L, self.K, [f"{s}_hat" for s in names]
+        if self.Lw != 0.0:
+            Lo, Ko, hats = np.vstack([self.L, [[self.Lw]]]), np.hstack([self.K, [[1.0]]]), hats + ["w_hat"]
+        A_cl = self.loop()
+        B_cl = np.vstack([self.Bd, Lo @ self.C @ self.Bd])
+        C_cl = np.block([[self.C, np.zeros((1, len(hats)))], [np.zeros((1, n)), -Ko]])
+        cl = control.ss(A_cl, B_cl, C_cl, np.zeros((2, 1)), self.dt, inputs=["disturbance_Nm"],
+                        outputs=["theta_1", "torque_Nm"], states=names + hats, name="rod_closed_loop")
+        return StateSpaces(ol, ols, cl)
 
     def to_json(self) -> dict:
         return {
@@ -79,6 +153,7 @@ class Design:
             "C": self.C.tolist(),
             "K": self.K.tolist(),
             "L": self.L.tolist(),
+            "L_disturbance": self.Lw,
             "observer_form": self.observer_form,
             "method": self.method,
             "K_continuous": self.K_continuous.tolist(),  # lqr(A, B, Q, R) with this file's weights (Sec. III-A)
@@ -91,7 +166,12 @@ class Design:
 
 
 def design(p: Params) -> Design:
-    """Design the firmware's gains for `p`; raise DesignRefused unless the sampled loop is stable."""
+    """Design the firmware's gains for `p` (a Params from load_params).
+
+    Returns a Design (see its docstring for shapes and conventions). Raises DesignRefused (a
+    UserError, exit 3 in the CLI) when the rod is not controllable or observable from theta_1, when
+    sampling hides an unstable mode, or when the sampled loop with observer is not stable.
+    """
     rod = RodModel.from_params(p, design=True)
     N, dt = rod.N, p.dt
     A, B = linearize_upright(rod)
@@ -127,6 +207,17 @@ def design(p: Params) -> Design:
         Qd, Rd, Nd = sampled.sampled_cost(A, B, Q, R, dt)
         Wd = sampled.sampled_process_noise(A, W, dt)
         L, _ = sampled.kalman_current(Ad, C, Wd, V / dt)
+        Lw = 0.0
+        qw = p["observer"]["process_noise_torque"]
+        if qw > 0:  # a random-walk torque at the base, estimated with the rod (the firmware cancels it)
+            n = 2 * N
+            Aa = np.block([[Ad, Bd], [np.zeros((1, n)), np.ones((1, 1))]])
+            Ca = np.hstack([C, np.zeros((1, 1))])
+            Wa = np.zeros((n + 1, n + 1))
+            Wa[:n, :n] = Wd
+            Wa[n, n] = qw * dt
+            La, _ = sampled.kalman_current(Aa, Ca, Wa, V / dt)
+            L, Lw = La[:n], float(La[n, 0])
         if p["design"]["method"] == "sampled":
             K, _ = sampled.dlqr(Ad, Bd, Qd, Rd, Nd)
         else:
@@ -134,7 +225,7 @@ def design(p: Params) -> Design:
     except (np.linalg.LinAlgError, ValueError) as e:
         raise DesignRefused(f"design refused: discrete Riccati equation failed ({e})") from None
 
-    d = Design(p, rod, dt, A, B, C, Ad, Bd, K, L, K_c, L_c, p["design"]["method"], checks=checks)
+    d = Design(p, rod, dt, A, B, C, Ad, Bd, K, L, K_c, L_c, p["design"]["method"], checks=checks, Lw=Lw)
     rho = sampled.spectral_radius(d.loop())
     checks["closed_loop_spectral_radius"] = rho
     if not np.all(np.isfinite(K)) or not np.all(np.isfinite(L)):

@@ -53,6 +53,9 @@ def _choice(*options):
     return check
 
 
+PLANT_MODELS = ("der", "inextensible")
+PLANT_MAX_EDGES = 200  # the simulated plant's discretization; beyond this a run costs minutes per second
+
 SCHEMA: dict[str, dict[str, Key]] = {
     "rod": {
         "edges": Key(int, "-", _between(2, 64)),
@@ -72,7 +75,13 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "resistance": Key(float, "ohm", _positive),
         "rotor_inertia": Key(float, "kg m^2", _nonneg),
         "viscous_friction": Key(float, "N m s/rad", _nonneg),
+        "coulomb_friction": Key(float, "N m", _nonneg),
         "design_includes_motor": Key(bool, "-"),
+    },
+    "plant": {
+        "model": Key(str, "-", _choice(*PLANT_MODELS)),
+        "edges": Key(int, "-", _between(2, PLANT_MAX_EDGES)),
+        "hub_length": Key(float, "m", _nonneg),
     },
     "driver": {
         "supply_voltage": Key(float, "V", _between(4.5, 36.0)),
@@ -94,22 +103,43 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "q_angle": Key(float, "1/rad^2", _nonneg),
         "q_rate": Key(float, "s^2/rad^2", _nonneg),
         "r_torque": Key(float, "1/(N m)^2", _positive),
+        "friction_compensation": Key(float, "N m", _nonneg),
     },
     "observer": {
         "process_noise_angle": Key(float, "rad^2/s", _nonneg),
         "process_noise_rate": Key(float, "rad^2/s^3", _nonneg),
         "measurement_noise": Key(float, "rad^2 s", _positive),
+        "process_noise_torque": Key(float, "(N m)^2/s", _nonneg),
     },
     "swing_up": {
-        "amplitude": Key(float, "N m", _nonneg),
+        "amplitude": Key(float, "N m", _nonneg),  # range: check_firmware_limits
         "angle_deg": Key(float, "deg", lambda v: None if 0 < v <= 180 else "must be in (0, 180]"),
-        "catch_angle_deg": Key(float, "deg", lambda v: None if 0 < v < 90 else "must be in (0, 90)"),
+        "catch_angle_deg": Key(float, "deg", lambda v: None if 0 < v <= 90 else "must be in (0, 90]"),
+        "energy_target": Key(float, "-", _between(0.5, 2.0)),
+        "rate_filter_hz": Key(float, "Hz", _positive),
     },
     "safety": {
         "torque_limit": Key(float, "N m", _positive),
         "angle_limit_deg": Key(float, "deg", lambda v: None if 0 < v <= 180 else "must be in (0, 180]"),
         "speed_limit": Key(float, "rad/s", _positive),
         "heartbeat_timeout": Key(float, "s", _between(0.05, 10.0)),
+    },
+    # Monte Carlo draws of the simulated plant for `rodctl robustness` and `rodctl tune`
+    # (host/rodctl/robust/uncertainty.py). The design never sees them. *_rel: uniform within
+    # +- that fraction of the value; *_factor: log-uniform between value / factor and value x factor.
+    "uncertainty": {
+        "samples": Key(int, "-", _between(0, 100000)),
+        "seed": Key(int, "-", _between(0, 2**32 - 1)),
+        "youngs_modulus_rel": Key(float, "-", _between(0.0, 0.9)),
+        "density_rel": Key(float, "-", _between(0.0, 0.9)),
+        "length_rel": Key(float, "-", _between(0.0, 0.5)),
+        "rod_damping_factor": Key(float, "-", _between(1.0, 1000.0)),
+        "viscous_friction_factor": Key(float, "-", _between(1.0, 1000.0)),
+        "coulomb_friction_rel": Key(float, "-", _between(0.0, 1.0)),
+        "rotor_inertia_rel": Key(float, "-", _between(0.0, 0.9)),
+        "torque_constant_rel": Key(float, "-", _between(0.0, 0.9)),
+        "supply_voltage_rel": Key(float, "-", _between(0.0, 0.5)),
+        "delay_periods_max": Key(int, "periods", _between(0, 10)),
     },
 }
 
@@ -123,12 +153,64 @@ def _cross_checks(p: dict) -> list[tuple[str, str]]:
         out.append(("observer.process_noise_angle", "and process_noise_rate cannot both be 0"))
     if p["lqr"]["q_angle"] == 0 and p["lqr"]["q_rate"] == 0:
         out.append(("lqr.q_angle", "and q_rate cannot both be 0"))
-    if p["swing_up"]["amplitude"] > p["safety"]["torque_limit"]:
-        out.append(("swing_up.amplitude", "must not exceed safety.torque_limit"))
+    if p["plant"]["hub_length"] >= p["rod"]["length"]:
+        out.append(("plant.hub_length", f"must be < rod.length = {p['rod']['length']:g} [m], got {p['plant']['hub_length']!r}"))
     try:
         counts_fraction(p)
     except ValueError as e:
         out.append(("encoder.counts_per_motor_rev", str(e)))
+    out += check_firmware_limits(p)
+    return out
+
+
+def _set_range(code_name: str) -> tuple[float, float | None]:
+    """(min, fixed max) of a SET parameter [device unit], from rodlink.toml's codes.param."""
+    from rodctl.link.protocol_spec import load_spec  # the one definition the firmware is generated from
+
+    c = load_spec().codes["param"].by_name(code_name)
+    return c.min, c.max
+
+
+def check_firmware_limits(p: dict) -> list[tuple[str, str]]:
+    """What firmware/src/core/rod_config.h asserts at compile time, checked before a header is written.
+
+    One entry per static_assert / #error there that the schema's own checks do not already
+    imply (tests/test_params_firmware_limits.py pairs each with a violating override), so `rodctl gains` stops
+    with one line instead of writing a header the firmware cannot compile.
+    """
+    out = []
+    sw, sa = p["swing_up"], p["safety"]
+    m, drv = p["motor"], p["driver"]
+    kt_out = m["gearbox_efficiency"] * m["gear_ratio"] * m["torque_constant"]
+    torque_max = min(kt_out * drv["current_limit"], sa["torque_limit"])  # = Params.torque_max = ROD_TORQUE_MAX_NM
+    lo, _ = _set_range("SWING_AMPLITUDE")
+    if not lo <= sw["amplitude"] <= torque_max:
+        which = ("driver.current_limit * motor torque at the output" if torque_max < sa["torque_limit"]
+                 else "safety.torque_limit")
+        out.append(("swing_up.amplitude", f"must be in [{lo:g}, {torque_max:.4g}] N m, the firmware's torque "
+                    f"ceiling (set by {which}), got {sw['amplitude']!r}"))
+    # compared in radians, as the header holds them: f32 rounding keeps the order, so what passes
+    # here passes the C++ static_asserts on the same f32 values
+    lo, hi = _set_range("SWING_ANGLE")
+    if not lo <= math.radians(sw["angle_deg"]) <= hi:
+        out.append(("swing_up.angle_deg", f"must be in [{math.degrees(lo):g}, {math.degrees(hi):g}] deg, "
+                    f"got {sw['angle_deg']!r}"))
+    lo, hi = _set_range("CATCH_ANGLE")
+    cmax = min(math.degrees(hi), sa["angle_limit_deg"])
+    if not lo <= math.radians(sw["catch_angle_deg"]) <= min(hi, math.radians(sa["angle_limit_deg"])):
+        out.append(("swing_up.catch_angle_deg", f"must be in [{math.degrees(lo):g}, {cmax:g}] deg "
+                    f"(at most 90 and safety.angle_limit_deg), got {sw['catch_angle_deg']!r}"))
+    lo, hi = _set_range("HEARTBEAT_TIMEOUT")
+    if not lo <= sa["heartbeat_timeout"] <= hi:
+        out.append(("safety.heartbeat_timeout", f"must be in [{lo:g}, {hi:g}] s, got {sa['heartbeat_timeout']!r}"))
+    try:
+        cpr = counts_fraction(p)
+    except ValueError:
+        return out  # reported above
+    if cpr.numerator < 2 or cpr.numerator > 1_000_000 or cpr.denominator > 1000 \
+            or cpr.numerator * cpr.denominator > 10_000_000:
+        out.append(("encoder.counts_per_motor_rev", f"times motor.gear_ratio = {cpr} counts per output turn: "
+                    "the firmware needs a fraction NUM/DEN with 2 <= NUM <= 1e6, DEN <= 1000, NUM*DEN <= 1e7"))
     return out
 
 
@@ -175,9 +257,11 @@ def load_params(path: str | Path | None = None, overrides: list[str] | tuple[str
     """Read a parameter file (default: Table I), apply `section.key=value` overrides, validate."""
     path = Path(path) if path is not None else DEFAULT_PARAMS
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as e:
         raise ParamError(f"{path}: cannot read parameter file ({e.strerror or e})") from None
+    except UnicodeDecodeError:
+        raise ParamError(f"{path}: not a parameter file (not UTF-8 text; expected TOML)") from None
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

@@ -73,20 +73,22 @@ def kalman_current(Ad, C, Wd, V):
     return L, P
 
 
-def closed_loop(Ad, Bd, C, K, L, Ad_obs=None, Bd_obs=None, actuator_gain: complex = 1.0):
+def closed_loop(Ad, Bd, C, K, L, Ad_obs=None, Bd_obs=None, actuator_gain: complex = 1.0, C_obs=None):
     """Linear sampled loop: plant (Ad, Bd) with the firmware's observer (Ad_obs, Bd_obs) and LQR.
 
     State [x_k, xhat_k] after the measurement update at step k. The actuator multiplies the
     command by `actuator_gain` (real: gain margin, unit complex: phase margin); the observer
-    predicts with the command it sent.
+    predicts with the command it sent. The observer may carry more states than the plant (an
+    estimated input disturbance): then Ad_obs, Bd_obs, C_obs and K are the observer's size.
     """
     Ao = Ad if Ad_obs is None else Ad_obs
     Bo = Bd if Bd_obs is None else Bd_obs
     no = Ao.shape[0]
     LC = L @ C
+    LCo = LC if C_obs is None else L @ C_obs
     I = np.eye(no)
     top = np.hstack([Ad, -actuator_gain * Bd @ K])
-    bottom = np.hstack([LC @ Ad, (I - LC) @ (Ao - Bo @ K) - actuator_gain * LC @ Bd @ K])
+    bottom = np.hstack([LC @ Ad, (I - LCo) @ (Ao - Bo @ K) - actuator_gain * LC @ Bd @ K])
     return np.vstack([top, bottom])
 
 

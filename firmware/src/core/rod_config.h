@@ -8,16 +8,17 @@
 #define ROD_CONFIG_H
 
 #include "rod_gains.h"
+#include "rod_protocol_defs.h"
 
 /* ---- the header's layout ---------------------------------------------------------------- */
 
 /* The macro set this firmware was written against (gains/codegen.py HEADER_SCHEMA_VERSION). */
-#define ROD_GAINS_SCHEMA_EXPECTED 1
+#define ROD_GAINS_SCHEMA_EXPECTED 2
 
 #ifndef ROD_GAINS_SCHEMA_VERSION
 #error "rod_gains.h has no ROD_GAINS_SCHEMA_VERSION: regenerate it with `rodctl gains`"
 #elif ROD_GAINS_SCHEMA_VERSION != ROD_GAINS_SCHEMA_EXPECTED
-#error "rod_gains.h has a different ROD_GAINS_SCHEMA_VERSION than this firmware expects (1): regenerate it with the rodctl of this checkout (`rodctl gains`)"
+#error "rod_gains.h has a different ROD_GAINS_SCHEMA_VERSION than this firmware expects (2): regenerate it with the rodctl of this checkout (`rodctl gains`)"
 #endif
 
 #if !defined(ROD_N) || !defined(ROD_NX) || !defined(ROD_LOOP_PERIOD_US) || !defined(ROD_DT_S) \
@@ -25,10 +26,12 @@
     || !defined(ROD_RATE_FILTER_K1) || !defined(ROD_RATE_FILTER_K2) \
     || !defined(ROD_MOTOR_KT_NM_PER_A) || !defined(ROD_MOTOR_KE_V_S_PER_RAD) || !defined(ROD_MOTOR_R_OHM) \
     || !defined(ROD_SUPPLY_V) || !defined(ROD_TORQUE_MAX_NM) || !defined(ROD_DUTY_MAX) \
-    || !defined(ROD_PWM_FREQUENCY_HZ) || !defined(ROD_SWING_AMPLITUDE_NM) || !defined(ROD_SWING_ANGLE_RAD) \
+    || !defined(ROD_PWM_FREQUENCY_HZ) || !defined(ROD_COULOMB_COMP_NM) || !defined(ROD_SWING_AMPLITUDE_NM) || !defined(ROD_SWING_ANGLE_RAD) \
+    || !defined(ROD_SWING_OMEGA0_RAD_S) || !defined(ROD_SWING_ENERGY_TARGET) || !defined(ROD_SWING_RATE_LP_K) \
     || !defined(ROD_CATCH_ANGLE_RAD) || !defined(ROD_ANGLE_LIMIT_RAD) || !defined(ROD_SPEED_LIMIT_RAD_S) \
     || !defined(ROD_HEARTBEAT_TIMEOUT_S) || !defined(ROD_GAINS_SHA256_BYTES_INIT) \
-    || !defined(ROD_AD_INIT) || !defined(ROD_BD_INIT) || !defined(ROD_K_INIT) || !defined(ROD_L_INIT)
+    || !defined(ROD_AD_INIT) || !defined(ROD_BD_INIT) || !defined(ROD_K_INIT) || !defined(ROD_L_INIT) \
+    || !defined(ROD_L_DISTURBANCE)
 #error "rod_gains.h lacks a macro the firmware needs: regenerate it with `rodctl gains`"
 #endif
 
@@ -70,14 +73,17 @@
 #define ROD_SWING_REST_RATE_RAD_S 0.05f
 #define ROD_SWING_REST_ANGLE_RAD 0.1f
 
-/* Runtime-setting bounds (SET): out of bounds -> BAD_VALUE, state unchanged. */
-#define ROD_DECIMATION_MIN 1
-#define ROD_DECIMATION_MAX 1000
-#define ROD_HEARTBEAT_TIMEOUT_MIN_S 0.05f
-#define ROD_HEARTBEAT_TIMEOUT_MAX_S 10.0f
-/* Catch angle must stay below both the balance angle limit (or balance would trip on entry)
- * and a quarter turn (beyond it the linear model is meaningless). */
-#define ROD_CATCH_ANGLE_MAX_RAD (ROD_ANGLE_LIMIT_RAD < ROD_HALF_PI_F ? ROD_ANGLE_LIMIT_RAD : ROD_HALF_PI_F)
+/* Energy pumping: the pump torque falls from full to zero over this much pendulum energy below
+ * the target (2 = upright at rest), and brakes likewise above it [-]. Narrow: the pump stays
+ * bang-bang (eq. 22) until the rod is nearly there. */
+#define ROD_SWING_ENERGY_BAND 0.1f
+
+/* Friction compensation ramps over this base rate [rad/s]: about the rate one count per
+ * 0.1 s gives, so it follows the motion without flipping on quantization noise. */
+#define ROD_FRICTION_RATE_BAND_RAD_S 0.05f
+
+/* Runtime-setting bounds (SET): ROD_PARAM_*_MIN / _MAX in rod_protocol_defs.h, generated from the
+ * ranges in rodlink.toml, the one definition `rodctl set` reads too. */
 
 /* Unprompted HELLO interval, in control steps (about once per second). */
 #define ROD_HELLO_INTERVAL_STEPS ((1000000u + ROD_LOOP_PERIOD_US / 2u) / ROD_LOOP_PERIOD_US)
@@ -87,7 +93,36 @@
 #define ROD_COMMAND_RING_SIZE 16u
 #define ROD_EVENT_RING_SIZE 32u
 
-/* ---- float assumptions (constant expressions; C11 and C++ alike) ------------------------ */
+/* ---- float assumptions ------------------------------------------------------------------
+ * C11 has no floating constant expressions (comparing floats in _Static_assert is a GCC
+ * extension that clang rejects), so these are checked twice elsewhere:
+ *  - by the generator: rodgains.params.check_firmware_limits refuses parameters that break any
+ *    of them (one line, exit 2), so `rodctl gains` never writes such a header;
+ *  - here in C++ only, where they are constant expressions: main.cpp includes this file, so
+ *    every firmware build still stops on a hand-edited header.
+ * Keep this list and check_firmware_limits in step (tests/test_params_firmware_limits.py pairs them). */
+
+#ifdef __cplusplus
+static_assert(ROD_TORQUE_MAX_NM > 0.0f, "torque ceiling must be positive");
+static_assert(ROD_DUTY_MAX > 0.0f && ROD_DUTY_MAX <= 1.0f, "duty ceiling must be in (0, 1]");
+static_assert(ROD_MOTOR_KT_NM_PER_A > 0.0f && ROD_MOTOR_R_OHM > 0.0f && ROD_SUPPLY_V > 0.0f,
+              "motor model needs positive kt, R and supply voltage");
+static_assert(ROD_MOTOR_KE_V_S_PER_RAD >= 0.0f, "back-EMF constant must not be negative");
+static_assert(ROD_ANGLE_LIMIT_RAD > 0.0f && ROD_ANGLE_LIMIT_RAD <= ROD_PI_F, "angle limit must be in (0, pi]");
+static_assert(ROD_SPEED_LIMIT_RAD_S > 0.0f, "speed limit must be positive");
+static_assert(ROD_DT_S > 0.0f, "control period must be positive");
+/* The defaults must pass the same bounds a SET would. */
+static_assert(ROD_SWING_AMPLITUDE_NM >= ROD_PARAM_SWING_AMPLITUDE_MIN && ROD_SWING_AMPLITUDE_NM <= ROD_PARAM_SWING_AMPLITUDE_MAX,
+              "default swing amplitude outside the SET range (at most the torque ceiling)");
+static_assert(ROD_SWING_ANGLE_RAD >= ROD_PARAM_SWING_ANGLE_MIN && ROD_SWING_ANGLE_RAD <= ROD_PARAM_SWING_ANGLE_MAX,
+              "default swing angle outside the SET range");
+static_assert(ROD_CATCH_ANGLE_RAD >= ROD_PARAM_CATCH_ANGLE_MIN && ROD_CATCH_ANGLE_RAD <= ROD_PARAM_CATCH_ANGLE_MAX,
+              "default catch angle outside the SET range (at most min(angle limit, 90 deg))");
+static_assert(ROD_HEARTBEAT_TIMEOUT_S >= ROD_PARAM_HEARTBEAT_TIMEOUT_MIN && ROD_HEARTBEAT_TIMEOUT_S <= ROD_PARAM_HEARTBEAT_TIMEOUT_MAX,
+              "default heartbeat timeout outside the SET range");
+#endif
+
+/* ---- integer assumptions (C11 and C++ alike) -------------------------------------------- */
 
 #ifdef __cplusplus
 #define ROD_STATIC_ASSERT(cond, msg) static_assert(cond, msg)
@@ -95,22 +130,6 @@
 #define ROD_STATIC_ASSERT(cond, msg) _Static_assert(cond, msg)
 #endif
 
-ROD_STATIC_ASSERT(ROD_TORQUE_MAX_NM > 0.0f, "torque ceiling must be positive");
-ROD_STATIC_ASSERT(ROD_DUTY_MAX > 0.0f && ROD_DUTY_MAX <= 1.0f, "duty ceiling must be in (0, 1]");
-ROD_STATIC_ASSERT(ROD_MOTOR_KT_NM_PER_A > 0.0f && ROD_MOTOR_R_OHM > 0.0f && ROD_SUPPLY_V > 0.0f,
-                  "motor model needs positive kt, R and supply voltage");
-ROD_STATIC_ASSERT(ROD_MOTOR_KE_V_S_PER_RAD >= 0.0f, "back-EMF constant must not be negative");
-ROD_STATIC_ASSERT(ROD_ANGLE_LIMIT_RAD > 0.0f && ROD_ANGLE_LIMIT_RAD <= ROD_PI_F, "angle limit must be in (0, pi]");
-ROD_STATIC_ASSERT(ROD_SPEED_LIMIT_RAD_S > 0.0f, "speed limit must be positive");
-/* The defaults must pass the same bounds a SET would. */
-ROD_STATIC_ASSERT(ROD_SWING_AMPLITUDE_NM >= 0.0f && ROD_SWING_AMPLITUDE_NM <= ROD_TORQUE_MAX_NM,
-                  "default swing amplitude outside [0, torque max]");
-ROD_STATIC_ASSERT(ROD_SWING_ANGLE_RAD > 0.0f && ROD_SWING_ANGLE_RAD <= ROD_PI_F, "default swing angle outside (0, pi]");
-ROD_STATIC_ASSERT(ROD_CATCH_ANGLE_RAD > 0.0f && ROD_CATCH_ANGLE_RAD < ROD_CATCH_ANGLE_MAX_RAD,
-                  "default catch angle must be inside (0, min(angle limit, pi/2))");
-ROD_STATIC_ASSERT(ROD_HEARTBEAT_TIMEOUT_S >= ROD_HEARTBEAT_TIMEOUT_MIN_S && ROD_HEARTBEAT_TIMEOUT_S <= ROD_HEARTBEAT_TIMEOUT_MAX_S,
-                  "default heartbeat timeout outside [0.05, 10] s");
-ROD_STATIC_ASSERT(ROD_DT_S > 0.0f, "control period must be positive");
 ROD_STATIC_ASSERT((ROD_COMMAND_RING_SIZE & (ROD_COMMAND_RING_SIZE - 1u)) == 0u, "ring sizes are powers of two");
 ROD_STATIC_ASSERT((ROD_EVENT_RING_SIZE & (ROD_EVENT_RING_SIZE - 1u)) == 0u, "ring sizes are powers of two");
 

@@ -38,6 +38,7 @@ uint8_t rod_control_arm(rod_control_t *c, uint8_t arm_mode)
     }
     if (arm_mode == ROD_ARM_SWING_UP) {
         c->mode = ROD_MODE_SWING_UP;
+        rod_swingup_init(&c->swing);
     } else if (c->mode != ROD_MODE_BALANCE) {
         c->mode = ROD_MODE_CATCH;
     }
@@ -63,6 +64,20 @@ uint8_t rod_control_clear_fault(rod_control_t *c)
     return ROD_ACK_OK;
 }
 
+uint8_t rod_control_identify(rod_control_t *c, const rod_identify_request_t *req)
+{
+    if (c->mode != ROD_MODE_DISARMED) {
+        return ROD_ACK_BAD_STATE;
+    }
+    if (!rod_identify_start(&c->ident, req)) {
+        return ROD_ACK_BAD_VALUE;
+    }
+    c->mode = ROD_MODE_IDENTIFY;
+    c->reason = ROD_REASON_NONE;
+    c->heartbeat_refresh = true;
+    return ROD_ACK_OK;
+}
+
 /* lo < v <= hi or lo <= v <= hi; false for NaN. */
 static bool within(float v, float lo, bool lo_open, float hi, bool hi_open)
 {
@@ -73,35 +88,37 @@ static bool within(float v, float lo, bool lo_open, float hi, bool hi_open)
 
 uint8_t rod_control_set(rod_control_t *c, uint8_t param, float value)
 {
+    /* Ranges: codes.param min / max / design_max of rodlink.toml (rod_protocol_defs.h), the same
+     * numbers `rodctl set` checks, so the host refuses before sending what the device would. */
     rod_settings_t *s = &c->settings;
     switch (param) {
     case ROD_PARAM_SWING_AMPLITUDE:
-        if (!within(value, 0.0f, false, ROD_TORQUE_MAX_NM, false)) {
+        if (!within(value, ROD_PARAM_SWING_AMPLITUDE_MIN, false, ROD_PARAM_SWING_AMPLITUDE_MAX, false)) {
             return ROD_ACK_BAD_VALUE;
         }
         s->swing_amplitude = value;
         return ROD_ACK_OK;
     case ROD_PARAM_SWING_ANGLE:
-        if (!within(value, 0.0f, true, ROD_PI_F, false)) {
+        if (!within(value, ROD_PARAM_SWING_ANGLE_MIN, false, ROD_PARAM_SWING_ANGLE_MAX, false)) {
             return ROD_ACK_BAD_VALUE;
         }
         s->swing_angle = value;
         return ROD_ACK_OK;
     case ROD_PARAM_CATCH_ANGLE:
-        if (!within(value, 0.0f, true, ROD_CATCH_ANGLE_MAX_RAD, true)) {
+        if (!within(value, ROD_PARAM_CATCH_ANGLE_MIN, false, ROD_PARAM_CATCH_ANGLE_MAX, false)) {
             return ROD_ACK_BAD_VALUE;
         }
         s->catch_angle = value;
         return ROD_ACK_OK;
     case ROD_PARAM_TELEMETRY_DECIMATION:
-        if (!within(value, (float)ROD_DECIMATION_MIN, false, (float)ROD_DECIMATION_MAX, false)
+        if (!within(value, ROD_PARAM_TELEMETRY_DECIMATION_MIN, false, ROD_PARAM_TELEMETRY_DECIMATION_MAX, false)
             || value != floorf(value)) {
             return ROD_ACK_BAD_VALUE;
         }
         s->decimation = (uint16_t)value;
         return ROD_ACK_OK;
     case ROD_PARAM_HEARTBEAT_TIMEOUT:
-        if (!within(value, ROD_HEARTBEAT_TIMEOUT_MIN_S, false, ROD_HEARTBEAT_TIMEOUT_MAX_S, false)) {
+        if (!within(value, ROD_PARAM_HEARTBEAT_TIMEOUT_MIN, false, ROD_PARAM_HEARTBEAT_TIMEOUT_MAX, false)) {
             return ROD_ACK_BAD_VALUE;
         }
         s->heartbeat_timeout = value;
@@ -172,6 +189,8 @@ static void check_safety(rod_control_t *c, bool overrun)
     } else if (c->mode == ROD_MODE_BALANCE
                && !(fabsf(rod_angle_from_upright_of(&c->angle, c->upright_turn)) <= ROD_ANGLE_LIMIT_RAD)) {
         trip(c, ROD_REASON_ANGLE_LIMIT);
+    } else if (c->mode == ROD_MODE_IDENTIFY && !(fabsf(c->angle.from_bottom) <= ROD_ANGLE_LIMIT_RAD)) {
+        trip(c, ROD_REASON_ANGLE_LIMIT);
     }
 }
 
@@ -199,10 +218,19 @@ static float control_law(rod_control_t *c)
         if (try_catch(c)) {
             return rod_observer_feedback(&c->obs);
         }
-        return rod_swingup_torque(c->settings.swing_amplitude, c->settings.swing_angle,
+        return rod_swingup_torque(&c->swing, c->settings.swing_amplitude, c->settings.swing_angle,
                                   c->angle.from_bottom, c->rate);
     case ROD_MODE_BALANCE:
         return rod_observer_step(&c->obs, rod_angle_from_upright_of(&c->angle, c->upright_turn));
+    case ROD_MODE_IDENTIFY: {
+        bool done;
+        float u = rod_identify_torque(&c->ident, &done);
+        if (done) {
+            c->mode = ROD_MODE_DISARMED;
+            c->reason = ROD_REASON_NONE;
+        }
+        return u;
+    }
     default:
         return 0.0f;
     }
@@ -220,10 +248,12 @@ void rod_control_step(rod_control_t *c, const rod_inputs_t *in, uint32_t heartbe
     check_safety(c, overrun);
 
     float request = control_law(c);
-    bool driving = c->mode == ROD_MODE_BALANCE || c->mode == ROD_MODE_SWING_UP;
+    bool driving = c->mode == ROD_MODE_BALANCE || c->mode == ROD_MODE_SWING_UP || c->mode == ROD_MODE_IDENTIFY;
     rod_drive_t drive = {0.0f, 0.0f};
+    /* the observer's model has no dry friction: it is told the torque net of the compensation */
+    float friction = c->mode == ROD_MODE_BALANCE ? rod_motor_friction_compensation(c->obs.z[ROD_N]) : 0.0f;
     if (driving) {
-        drive = rod_motor_drive(request, c->rate);
+        drive = rod_motor_drive(request + friction, c->rate);
         bool estimate_ok = c->mode != ROD_MODE_BALANCE || c->obs.finite;
         if (!estimate_ok || !isfinite(drive.torque) || !isfinite(drive.duty)) {
             trip(c, ROD_REASON_NON_FINITE);
@@ -231,7 +261,7 @@ void rod_control_step(rod_control_t *c, const rod_inputs_t *in, uint32_t heartbe
             drive.duty = 0.0f;
             drive.torque = 0.0f;
         } else if (c->mode == ROD_MODE_BALANCE) {
-            rod_observer_hold(&c->obs, drive.torque);
+            rod_observer_hold(&c->obs, drive.torque - friction);
         }
     }
 

@@ -6,6 +6,8 @@
  *   CATCH     armed for balance, driver off until theta_1 is within the catch angle of upright
  *   SWING_UP  eq. (22) pumping until theta_1 is within the catch angle, then BALANCE
  *   BALANCE   observer + LQR
+ *   IDENTIFY  an identification excitation (rod_identify.h) near hanging; DISARMED, reason
+ *             NONE, when it has played to the end
  *   FAULT     driver off, latched until clear-fault; arm is refused (BAD_STATE)
  *
  * Trips (-> FAULT, zero duty, driver off in the same step):
@@ -14,9 +16,10 @@
  *                 previous one took longer than a period (overruns are counted in every mode)
  *   HEARTBEAT     armed and no valid host frame for the heartbeat timeout
  *   SPEED_LIMIT   armed and |base rate| > ROD_SPEED_LIMIT_RAD_S
- *   ANGLE_LIMIT   BALANCE and |theta_1 - the caught upright| > ROD_ANGLE_LIMIT_RAD
+ *   ANGLE_LIMIT   BALANCE and |theta_1 - the caught upright| > ROD_ANGLE_LIMIT_RAD, or
+ *                 IDENTIFY and |theta_1 - the nearest hanging| > ROD_ANGLE_LIMIT_RAD
  *   NON_FINITE    NaN/inf in the estimate, torque or duty
- * ("armed" = CATCH, SWING_UP or BALANCE.)
+ * ("armed" = CATCH, SWING_UP, BALANCE or IDENTIFY.)
  *
  * Commands come from the host (through the device's command ring) and return a ROD_ACK_*
  * code; a refused command changes nothing.
@@ -29,8 +32,10 @@
 
 #include "rod_angle.h"
 #include "rod_config.h"
+#include "rod_identify.h"
 #include "rod_io.h"
 #include "rod_observer.h"
+#include "rod_swingup.h"
 #include "rod_protocol_defs.h"
 
 #ifdef __cplusplus
@@ -60,7 +65,11 @@ typedef struct {
 
     /* balance */
     rod_observer_t obs;
+    rod_swingup_t swing;
     int32_t upright_turn; /* the upright being balanced: pi + 2 pi upright_turn */
+
+    /* identification */
+    rod_identify_t ident;
 
     /* outputs of this step */
     bool enable;
@@ -92,6 +101,9 @@ uint8_t rod_control_arm(rod_control_t *c, uint8_t arm_mode);
 uint8_t rod_control_disarm(rod_control_t *c);
 /* FAULT -> DISARMED (the reason is kept for the record); elsewhere an OK no-op. */
 uint8_t rod_control_clear_fault(rod_control_t *c);
+/* DISARMED -> IDENTIFY playing *req (BAD_STATE in any other mode, BAD_VALUE out of range).
+ * Starting counts as hearing from the host. */
+uint8_t rod_control_identify(rod_control_t *c, const rod_identify_request_t *req);
 /* param ROD_PARAM_*; out of bounds, not finite, not an integer where one is needed, or an
  * unknown param -> BAD_VALUE and nothing changes. */
 uint8_t rod_control_set(rod_control_t *c, uint8_t param, float value);
@@ -105,7 +117,8 @@ uint8_t rod_control_flags(const rod_control_t *c);
 
 static inline bool rod_mode_is_armed(uint8_t mode)
 {
-    return mode == ROD_MODE_BALANCE || mode == ROD_MODE_SWING_UP || mode == ROD_MODE_CATCH;
+    return mode == ROD_MODE_BALANCE || mode == ROD_MODE_SWING_UP || mode == ROD_MODE_CATCH
+           || mode == ROD_MODE_IDENTIFY;
 }
 
 #ifdef __cplusplus

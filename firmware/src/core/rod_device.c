@@ -14,6 +14,7 @@ void rod_device_init(rod_device_t *dev)
     dev->steps_since_telemetry = 0;
     dev->steps_since_hello = 0;
     dev->hello_wanted = true; /* announce ourselves on the first step */
+    dev->board_fault = ROD_REASON_NONE;
 }
 
 /* A numbered slot for the next frame; NULL (and one drop, one number used) when the ring is
@@ -52,8 +53,27 @@ static uint8_t apply_command(rod_device_t *dev, const rod_msg_command_t *cmd)
     case ROD_MSG_HELLO_REQUEST:
         dev->hello_wanted = true;
         return ROD_ACK_OK;
+    case ROD_MSG_IDENTIFY: {
+        rod_identify_request_t req = {cmd->excitation, cmd->seed, cmd->amplitude, cmd->duration,
+                                      cmd->shape1, cmd->shape2};
+        return rod_control_identify(c, &req);
+    }
     default:
         return ROD_ACK_UNKNOWN_COMMAND;
+    }
+}
+
+static void latch_board_fault(rod_device_t *dev, rod_outputs_t *out)
+{
+    if (dev->board_fault == ROD_REASON_NONE) {
+        return;
+    }
+    dev->control.mode = ROD_MODE_FAULT;
+    dev->control.reason = dev->board_fault;
+    if (out != NULL) {
+        out->enable = false;
+        out->duty = 0.0f;
+        out->torque = 0.0f;
     }
 }
 
@@ -62,6 +82,7 @@ static void handle_commands(rod_device_t *dev, uint32_t now_us)
     rod_msg_command_t cmd;
     while (rod_link_take_command(&dev->link, &cmd)) {
         uint8_t result = apply_command(dev, &cmd);
+        latch_board_fault(dev, NULL);  /* a CLEAR_FAULT cannot leave it, nor open the door to an ARM */
         rod_event_t *ev = new_event(dev, ROD_MSG_ACK, now_us);
         if (ev != NULL) {
             ev->u.ack.command = cmd.type;
@@ -127,13 +148,20 @@ static void queue_hello(rod_device_t *dev, uint32_t now_us)
     rod_link_publish_event(&dev->link);
 }
 
+void rod_device_board_fault(rod_device_t *dev, uint8_t reason)
+{
+    dev->board_fault = reason;
+}
+
 void rod_device_step(rod_device_t *dev, const rod_inputs_t *in, rod_outputs_t *out)
 {
     /* Read the heartbeat count before the commands: the main loop counts a frame before it
      * queues it, so every command seen here has its heartbeat counted too. */
     uint32_t heartbeats = dev->link.heartbeats;
+    latch_board_fault(dev, NULL);  /* before the commands, so an ARM is refused in FAULT */
     handle_commands(dev, in->now_us);
     rod_control_step(&dev->control, in, heartbeats, out);
+    latch_board_fault(dev, out);
 
     if (++dev->steps_since_telemetry >= dev->control.settings.decimation) {
         dev->steps_since_telemetry = 0;

@@ -37,6 +37,7 @@ typedef struct {
     uint32_t steps_since_telemetry;
     uint32_t steps_since_hello;
     bool hello_wanted;
+    uint8_t board_fault; /* ROD_REASON_* the board reported (rod_device_board_fault), NONE normally */
 } rod_device_t;
 
 /* Power-on state: DISARMED, driver off, default settings. */
@@ -60,6 +61,11 @@ void rod_device_count_tx_drop(rod_device_t *dev);
 /* Main loop: queue a command as if it came from the host (the SIL's host-less path); false
  * when the command ring is full. A command with status ROD_ACK_OK counts as a heartbeat. */
 bool rod_device_post_command(rod_device_t *dev, const rod_msg_command_t *cmd);
+
+/* Board: it cannot run the control as it should (e.g. ROD_REASON_NO_TIMER: its timer did not
+ * start). From then on every step ends in FAULT with this reason, outputs off, and CLEAR_FAULT
+ * cannot leave it: only a reset can. Steps keep answering the host, so HELLO and telemetry say why. */
+void rod_device_board_fault(rod_device_t *dev, uint8_t reason);
 
 /* Main loop: count a valid host frame (keeps the heartbeat alive without sending one). */
 void rod_device_heartbeat(rod_device_t *dev);

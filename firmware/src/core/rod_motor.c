@@ -15,6 +15,11 @@ static float clamp(float x, float limit)
     return x;
 }
 
+float rod_motor_friction_compensation(float rate)
+{
+    return ROD_COULOMB_COMP_NM * clamp(rate * (1.0f / ROD_FRICTION_RATE_BAND_RAD_S), 1.0f);
+}
+
 rod_drive_t rod_motor_drive(float torque, float rate)
 {
     rod_drive_t d;

@@ -22,6 +22,13 @@ typedef struct {
  * non-finite check sees it. */
 rod_drive_t rod_motor_drive(float torque, float rate);
 
+/* The gearbox's dry friction, cancelled in the direction of the estimated base rate [N m]:
+ * ROD_COULOMB_COMP_NM sat(rate / ROD_FRICTION_RATE_BAND_RAD_S). Uncancelled, a shaft the
+ * friction holds tells the observer nothing, and the rod drifts into a bent shape the LQR
+ * no longer sees (balance from 30 deg ended 9 deg off with 5 mN m of friction). The rate is
+ * the observer's, not the encoder filter's: quantization makes the latter chatter at rest. */
+float rod_motor_friction_compensation(float rate);
+
 #ifdef __cplusplus
 }
 #endif

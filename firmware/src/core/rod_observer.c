@@ -23,6 +23,7 @@ void rod_observer_init(rod_observer_t *o, float y, float rate)
         o->z[ROD_N + i] = rate;
     }
     o->u_prev = 0.0f;
+    o->w = 0.0f;
     o->finite = isfinite(y) && isfinite(rate);
 }
 
@@ -50,9 +51,10 @@ static inline void predict(const float *z, float u, float *zp)
 float rod_observer_step(rod_observer_t *o, float y)
 {
     float zp[ROD_NX];
-    predict(o->z, o->u_prev, zp);
+    predict(o->z, o->u_prev + o->w, zp);
     const float innovation = y - zp[0];
-    float fb = 0.0f;
+    o->w = fmaf(ROD_L_DISTURBANCE, innovation, o->w);
+    float fb = o->w;
     /* x - x is 0 for every finite x and NaN otherwise, so `check` stays 0 exactly while the
      * whole estimate is finite, without a branch per entry. */
     float check = 0.0f;
@@ -63,13 +65,13 @@ float rod_observer_step(rod_observer_t *o, float y)
         fb = fmaf(K[i], zi, fb);
         check += zi - zi;
     }
-    o->finite = (check == 0.0f);
+    o->finite = (check == 0.0f) && isfinite(o->w);
     return -fb;
 }
 
 float rod_observer_feedback(const rod_observer_t *o)
 {
-    float fb = 0.0f;
+    float fb = o->w;
     for (int i = 0; i < ROD_NX; i++) {
         fb = fmaf(K[i], o->z[i], fb);
     }

@@ -2,7 +2,10 @@
  *
  * Deviation coordinates z = x - x_upright, x = [theta_1..N, rates], measurement
  * y = theta_1 - upright. Each period:
- *     z_pred = Ad z + Bd u_prev;   z = z_pred + L (y - z_pred[0]);   u = -K z
+ *     z_pred = Ad z + Bd (u_prev + w);   e = y - z_pred[0];   z = z_pred + L e;   w += Lw e
+ *     u = -K z - w
+ * w is a torque the rod feels at the base beyond the command (the gearbox's dry friction, a
+ * torque-constant error, a steady push): estimated as a random walk and cancelled.
  * with the tables of rod_gains.h (designed for exactly this form and ZOH at the loop rate).
  */
 #ifndef ROD_OBSERVER_H
@@ -18,6 +21,7 @@ extern "C" {
 
 typedef struct {
     float z[ROD_NX]; /* estimate z[k|k]: angles then rates, relative to upright */
+    float w;         /* estimated torque disturbance at the base (dry friction, k_t error) [N m] */
     float u_prev;    /* torque held over the last period [N m] */
     bool finite;     /* false once any estimate entry is NaN or inf */
 } rod_observer_t;

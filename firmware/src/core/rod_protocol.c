@@ -330,7 +330,7 @@ size_t rod_proto_encode_telemetry(const rod_msg_telemetry_t *m, uint32_t seq, ui
 /* Fixed-size messages are always short enough for link mode (checked at compile time). */
 #define ROD_SHORT(payload) (ROD_PROTO_HEADER_SIZE + (payload) + ROD_PROTO_CRC_SIZE < 254u)
 _Static_assert(ROD_SHORT(ROD_HELLO_PAYLOAD_SIZE) && ROD_SHORT(ROD_ACK_PAYLOAD_SIZE) && ROD_SHORT(ROD_SET_PAYLOAD_SIZE) &&
-                   ROD_SHORT(ROD_ARM_PAYLOAD_SIZE),
+                   ROD_SHORT(ROD_ARM_PAYLOAD_SIZE) && ROD_SHORT(ROD_IDENTIFY_PAYLOAD_SIZE),
                "fixed-size rodlink messages must stay below 254 bytes");
 
 size_t rod_proto_encode_hello(const rod_msg_hello_t *m, uint32_t seq, uint32_t time_us, uint8_t *out, size_t cap)
@@ -391,6 +391,7 @@ static int command_payload_size(uint32_t type)
     case ROD_MSG_CLEAR_FAULT: return (int)ROD_CLEAR_FAULT_PAYLOAD_SIZE;
     case ROD_MSG_SET: return (int)ROD_SET_PAYLOAD_SIZE;
     case ROD_MSG_HELLO_REQUEST: return (int)ROD_HELLO_REQUEST_PAYLOAD_SIZE;
+    case ROD_MSG_IDENTIFY: return (int)ROD_IDENTIFY_PAYLOAD_SIZE;
     default: return -1;
     }
 }
@@ -413,6 +414,14 @@ size_t rod_proto_encode_command(const rod_msg_command_t *m, uint8_t *out, size_t
     } else if (m->type == ROD_MSG_SET) {
         wr_u8(&w, m->param, 1);
         wr_f32(&w, m->value, 1);
+    } else if (m->type == ROD_MSG_IDENTIFY) {
+        wr_u8(&w, m->excitation, 1);
+        wr_u8(&w, 0u, 1); /* reserved */
+        wr_u16(&w, m->seed, 1);
+        wr_f32(&w, m->amplitude, 1);
+        wr_f32(&w, m->duration, 1);
+        wr_f32(&w, m->shape1, 1);
+        wr_f32(&w, m->shape2, 1);
     }
     return wr_finish(&w, out, 1);
 }
@@ -540,6 +549,9 @@ int rod_proto_decode_command(const rod_packet_t *p, rod_msg_command_t *m)
     m->arm_mode = 0;
     m->param = 0;
     m->value = 0.0f;
+    m->excitation = 0;
+    m->seed = 0;
+    m->amplitude = m->duration = m->shape1 = m->shape2 = 0.0f;
     int size = command_payload_size(p->type);
     if (size < 0) {
         m->status = ROD_ACK_UNKNOWN_COMMAND;
@@ -552,6 +564,14 @@ int rod_proto_decode_command(const rod_packet_t *p, rod_msg_command_t *m)
         } else if (p->type == ROD_MSG_SET) {
             m->param = p->payload[ROD_SET_OFF_PARAM];
             m->value = get_f32(p->payload + ROD_SET_OFF_VALUE);
+        } else if (p->type == ROD_MSG_IDENTIFY) {
+            const uint8_t *q = p->payload;
+            m->excitation = q[ROD_IDENTIFY_OFF_EXCITATION];
+            m->seed = (uint16_t)get_u16(q + ROD_IDENTIFY_OFF_SEED);
+            m->amplitude = get_f32(q + ROD_IDENTIFY_OFF_AMPLITUDE);
+            m->duration = get_f32(q + ROD_IDENTIFY_OFF_DURATION);
+            m->shape1 = get_f32(q + ROD_IDENTIFY_OFF_SHAPE1);
+            m->shape2 = get_f32(q + ROD_IDENTIFY_OFF_SHAPE2);
         }
     }
     return ROD_DECODE_OK;

@@ -49,11 +49,11 @@ typedef struct {
     uint8_t mode;             /* mode after the command */
 } rod_msg_ack_t;
 
-/* Host -> device command (HEARTBEAT, ARM, DISARM, CLEAR_FAULT, SET, HELLO_REQUEST).
+/* Host -> device command (HEARTBEAT, ARM, DISARM, CLEAR_FAULT, SET, HELLO_REQUEST, IDENTIFY).
  * status: ROD_ACK_OK, or ROD_ACK_UNKNOWN_COMMAND / ROD_ACK_BAD_LENGTH for a CRC-valid frame the
  * device must refuse. The codec checks only type and payload length; the values (arm_mode 1 or 2,
  * param 1..5, value finite and in range) are for the device to judge (ROD_ACK_BAD_VALUE).
- * arm_mode is set for ARM, param/value for SET; unused fields are 0. */
+ * arm_mode is set for ARM, param/value for SET, excitation..shape2 for IDENTIFY; unused fields are 0. */
 typedef struct {
     uint8_t type;
     uint32_t seq, time_us;
@@ -61,6 +61,10 @@ typedef struct {
     uint8_t arm_mode;
     uint8_t param;
     float value;
+    uint8_t excitation;       /* IDENTIFY: ROD_EXCITATION_* */
+    uint16_t seed;            /* IDENTIFY: PRBS LFSR start state */
+    float amplitude, duration; /* IDENTIFY: [N m], [s] */
+    float shape1, shape2;     /* IDENTIFY: per excitation (rodlink.toml) */
 } rod_msg_command_t;
 
 /* ---- primitives --------------------------------------------------------------------------- */
@@ -83,8 +87,8 @@ size_t rod_cobs_decode(const uint8_t *in, size_t n, uint8_t *out, size_t cap);
 size_t rod_proto_encode_telemetry(const rod_msg_telemetry_t *m, uint32_t seq, uint32_t time_us, uint8_t *out, size_t cap);
 size_t rod_proto_encode_hello(const rod_msg_hello_t *m, uint32_t seq, uint32_t time_us, uint8_t *out, size_t cap);
 size_t rod_proto_encode_ack(const rod_msg_ack_t *m, uint32_t seq, uint32_t time_us, uint8_t *out, size_t cap);
-/* Host side (used by the SIL and tests): m->type, m->seq, m->time_us and arm_mode (ARM) or
- * param/value (SET); m->status is ignored. */
+/* Host side (used by the SIL and tests): m->type, m->seq, m->time_us and arm_mode (ARM),
+ * param/value (SET) or excitation..shape2 (IDENTIFY); m->status is ignored. */
 size_t rod_proto_encode_command(const rod_msg_command_t *m, uint8_t *out, size_t cap);
 
 /* ---- device receive path ------------------------------------------------------------------ */

@@ -1,12 +1,27 @@
-/* rod_swingup.c -- eq. (22) plus the kick that starts it from rest. */
+/* rod_swingup.c -- energy pumping (eq. (22) generalized) plus the kick that starts it from rest. */
 #include "rod_swingup.h"
 
 #include <math.h>
 
 #include "rod_config.h"
 
-float rod_swingup_torque(float amplitude, float swing_angle, float from_bottom, float rate)
+void rod_swingup_init(rod_swingup_t *s)
 {
+    s->rate_lp = 0.0f;
+}
+
+float rod_swingup_energy(float from_bottom, float rate)
+{
+    const float v = rate * (1.0f / ROD_SWING_OMEGA0_RAD_S);
+    return 0.5f * v * v + (1.0f - cosf(from_bottom));
+}
+
+float rod_swingup_torque(rod_swingup_t *s, float amplitude, float swing_angle, float from_bottom, float rate)
+{
+    /* The base rate carries the bending modes (the shaft is their node); pumping on their sign
+     * feeds them instead of the pendulum. The low-pass keeps the pendulum's swing (~1.4 Hz). */
+    s->rate_lp += ROD_SWING_RATE_LP_K * (rate - s->rate_lp);
+    const float w = s->rate_lp;
     float off = fabsf(from_bottom);
     if (!(off < swing_angle)) {
         return 0.0f;
@@ -14,11 +29,17 @@ float rod_swingup_torque(float amplitude, float swing_angle, float from_bottom, 
     if (fabsf(rate) <= ROD_SWING_REST_RATE_RAD_S && off <= ROD_SWING_REST_ANGLE_RAD) {
         return amplitude;
     }
-    if (rate > 0.0f) {
-        return amplitude;
+    float gain = (ROD_SWING_ENERGY_TARGET - rod_swingup_energy(from_bottom, w)) * (1.0f / ROD_SWING_ENERGY_BAND);
+    if (gain > 1.0f) {
+        gain = 1.0f;
+    } else if (gain < -1.0f) {
+        gain = -1.0f;
     }
-    if (rate < 0.0f) {
-        return -amplitude;
+    if (w > 0.0f) {
+        return amplitude * gain;
+    }
+    if (w < 0.0f) {
+        return -amplitude * gain;
     }
     return 0.0f;
 }

@@ -1,7 +1,14 @@
-/* rod_swingup.h -- the swing-up law, eq. (22) of the paper, with a start from rest.
+/* rod_swingup.h -- swing-up by energy pumping toward the upright energy, with a start from rest.
  *
- *     u = amplitude sign(dtheta_1)   while |theta_1| < swing angle (theta_1 from hanging)
- *     u = 0                          otherwise
+ * The rod is treated as a rigid pendulum on the shaft for the energy only (its bending modes
+ * are filtered out of the rate, not modelled):
+ *     w = low-passed base rate,   e = (w / omega0)^2 / 2 + 1 - cos(theta_1)   (2 = upright at rest)
+ *     u = amplitude sat((target e - e) / ROD_SWING_ENERGY_BAND) sign(w)   while |theta_1| < swing angle
+ *     u = 0                                                              otherwise
+ * theta_1 from hanging. Below the target it pumps like eq. (22) of the paper, u = amplitude
+ * sign(dtheta_1), but at every angle up to the swing angle; at the target it stops pushing, and
+ * above it brakes, so the rod arrives near upright slowly instead of flying over the top.
+ * omega0 (the rigid rod + motor pendulum frequency) and the target come from rod_gains.h.
  */
 #ifndef ROD_SWINGUP_H
 #define ROD_SWINGUP_H
@@ -10,10 +17,19 @@
 extern "C" {
 #endif
 
-/* from_bottom: theta_1 minus the nearest hanging position [rad] (rod_angle_t.from_bottom);
- * rate: measured base rate [rad/s]. At rest near the bottom sign(rate) is 0 and the rod would
- * never start, so there the law pushes with +amplitude (ROD_SWING_REST_*). */
-float rod_swingup_torque(float amplitude, float swing_angle, float from_bottom, float rate);
+typedef struct {
+    float rate_lp; /* base rate through a first-order low-pass [rad/s] */
+} rod_swingup_t;
+
+void rod_swingup_init(rod_swingup_t *s);
+
+/* One period. from_bottom: theta_1 minus the nearest hanging position [rad]
+ * (rod_angle_t.from_bottom); rate: measured base rate [rad/s]. At rest near the bottom sign(rate)
+ * is 0 and the rod would never start, so there the law pushes with +amplitude (ROD_SWING_REST_*). */
+float rod_swingup_torque(rod_swingup_t *s, float amplitude, float swing_angle, float from_bottom, float rate);
+
+/* The pendulum energy e of the law above (2 = upright at rest) for this angle and rate. */
+float rod_swingup_energy(float from_bottom, float rate);
 
 #ifdef __cplusplus
 }

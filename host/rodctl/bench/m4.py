@@ -52,7 +52,7 @@ int main(void)
     rod_inputs_t in = {490, 0u, 0u, false};
     rod_outputs_t out;
     rod_device_init(&dev);
-    rod_msg_command_t arm = {ROD_MSG_ARM, 1u, 0u, ROD_ACK_OK, ROD_ARM_BALANCE, 0u, 0.0f};
+    rod_msg_command_t arm = {.type = ROD_MSG_ARM, .seq = 1u, .status = ROD_ACK_OK, .arm_mode = ROD_ARM_BALANCE};
     rod_device_post_command(&dev, &arm);
     rod_device_step(&dev, &in, &out); /* arm, catch: BALANCE from here on */
     drain();
@@ -130,14 +130,16 @@ def step_instructions(header: Path, work: Path) -> tuple[float, str]:
 
 def measure() -> dict:
     work = paths.BUILD / "bench_m4"
-    n5 = paths.COMMITTED_HEADER
+    n5 = header_for_edges(5, work / "headers")  # the committed header has the default N (rod.edges)
     n20 = header_for_edges(20, work / "headers")
     i5, _ = step_instructions(n5, work / "n5")
     i20, _ = step_instructions(n20, work / "n20")
-    size = target_build.build(n5)
+    idef, _ = step_instructions(paths.COMMITTED_HEADER, work / "default")
+    size = target_build.build(paths.COMMITTED_HEADER)
     return {
         "m4_step_instructions_n5": round(i5, 1),
         "m4_step_instructions_n20": round(i20, 1),
+        "m4_step_instructions_default": round(idef, 1),
         "m4_core_flash_bytes": size.flash_bytes,
         "m4_core_ram_bytes": size.ram_bytes,
     }

@@ -9,7 +9,7 @@ import sys
 import time
 from pathlib import Path
 
-from rodgains.errors import UserError
+from rodgains.errors import InputError, UserError
 
 # key: (goal, "<=" or ">=", unit, what)
 GOALS = {
@@ -17,12 +17,19 @@ GOALS = {
     "gains_seconds_n20": (10.0, "<=", "s", "`rodctl gains` for N = 20, wall time with interpreter start"),
     "m4_step_instructions_n5": (2000, "<=", "instr", "one control step + its telemetry frame, Cortex-M4F, N = 5"),
     "m4_step_instructions_n20": (15000, "<=", "instr", "the same, N = 20"),
-    "m4_core_flash_bytes": (None, "", "B", "portable core flash (text + data), N = 5"),
-    "m4_core_ram_bytes": (None, "", "B", "portable core RAM (data + bss), N = 5"),
+    "m4_step_instructions_default": (None, "", "instr", "the same, the committed header's N (rod.edges)"),
+    "m4_core_flash_bytes": (None, "", "B", "portable core flash (text + data), the committed header"),
+    "m4_core_ram_bytes": (None, "", "B", "portable core RAM (data + bss), the committed header"),
     "sil_realtime_factor_n5": (1000, ">=", "x", "SIL firmware + N = 5 inextensible plant at 1 kHz"),
     "sil_realtime_factor_n20": (50, ">=", "x", "SIL firmware (N = 20) + N = 20 inextensible plant at 1 kHz"),
     "sil_realtime_factor_der20": (50, ">=", "x", "SIL firmware (N = 20) + N = 20 extensible (DER) plant"),
-    "host_decode_frames_per_s": (100000, ">=", "frames/s", "Python decoder, N = 5 telemetry"),
+    "host_decode_frames_per_s": (1e6, ">=", "frames/s", "vectorized decoder (link/batch.py), N = 5 telemetry"),
+    "host_stream_decode_frames_per_s": (100000, ">=", "frames/s", "streaming protocol.Decoder, N = 5 telemetry"),
+    "host_log_read_frames_per_s": (1e6, ">=", "frames/s", "read_log of a 1,000,000-frame CSV log (200,000 with --quick), the plot's columns"),
+    "plot_log_mb_per_s": (None, "", "MB/s", "`rodctl plot` of that log (210 MB) to PNG, log MB per wall second (a process)"),
+    "plot_peak_memory_mb": (1000, "<=", "MB", "peak resident memory of that `rodctl plot` process"),
+    "robustness_runs_per_s_per_core": (None, "", "runs/s", "matrix runs (both tasks) on one local worker"),
+    "robustness_scaling_1_to_2_workers": (1.7, ">=", "x", "matrix runs/s with 2 local workers / with 1"),
 }
 
 
@@ -64,10 +71,17 @@ def measure(groups: set[str], quick: bool = False) -> dict:
         out["sil_realtime_factor_n5"] = round(_sil_factor(5, "inextensible", secs), 1)
         out["sil_realtime_factor_n20"] = round(_sil_factor(20, "inextensible", secs), 1)
         out["sil_realtime_factor_der20"] = round(_sil_factor(20, "der", secs), 1)
+    if "robust" in groups:
+        from rodctl.bench import robust as bench_robust
+
+        out.update(bench_robust.measure(quick=quick))
     if "host" in groups:
         from rodctl.bench.protocol import measure_decode_rate
 
-        out["host_decode_frames_per_s"] = round(measure_decode_rate(seconds=0.5 if quick else 2.0))
+        from rodctl.bench import logs as bench_logs
+
+        out["host_stream_decode_frames_per_s"] = round(measure_decode_rate(seconds=0.5 if quick else 2.0))
+        out.update(bench_logs.measure(quick=quick))
     return out
 
 
@@ -80,12 +94,12 @@ def verdict(key: str, value: float) -> str:
 
 
 def run_bench(args) -> int:
-    groups = set(args.only.split(",")) if args.only else {"gains", "m4", "sil", "host"}
-    unknown = groups - {"gains", "m4", "sil", "host"}
+    groups = set(args.only.split(",")) if args.only else {"gains", "m4", "sil", "host", "robust"}
+    unknown = groups - {"gains", "m4", "sil", "host", "robust"}
     if unknown:
-        raise UserError(f"--only {args.only}: unknown group(s) {', '.join(sorted(unknown))}; gains, m4, sil, host")
+        raise InputError(f"--only {args.only}: unknown group(s) {', '.join(sorted(unknown))}; gains, m4, sil, host, robust")
     results = {}
-    for g in ("gains", "m4", "sil", "host"):
+    for g in ("gains", "m4", "sil", "host", "robust"):
         if g in groups:
             print(f"measuring {g} ...", file=sys.stderr, flush=True)
             results.update(measure({g}, quick=args.quick))
@@ -109,6 +123,6 @@ def register(sub) -> None:
                                    "counts come from QEMU (../shared/tools/m4-icount.sh); speeds are medians of "
                                    "repeated runs. Exit 1 when a goal is missed.")
     b.add_argument("--json", metavar="PATH", help="write the results as JSON")
-    b.add_argument("--only", metavar="GROUPS", help="comma-separated subset of: gains, m4, sil, host")
+    b.add_argument("--only", metavar="GROUPS", help="comma-separated subset of: gains, m4, sil, host, robust")
     b.add_argument("--quick", action="store_true", help="shorter runs (noisier)")
     b.set_defaults(func=run_bench)

@@ -8,7 +8,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from rodgains.errors import UserError
+from rodgains.errors import InputError, UserError
 from rodgains.params import DEFAULT_PARAMS, Params, load_params
 
 from rodctl import paths
@@ -67,12 +67,38 @@ def generated_files(args) -> tuple[object, dict[Path, str]]:
     return d, files
 
 
+def _writable_dir(path: str | Path, what: str) -> None:
+    """UserError unless path's folder exists and is a folder (checked before any design work)."""
+    parent = Path(path).resolve().parent
+    if not parent.is_dir():
+        raise InputError(f"{what} {path}: folder {parent} does not exist")
+    if Path(path).is_dir():
+        raise InputError(f"{what} {path}: is a folder")
+
+
+def _write(path: Path, text: str) -> None:
+    try:
+        path.write_text(text)
+    except OSError as e:
+        raise InputError(f"writing {path} failed: {e.strerror or e}") from None
+
+
 def run_gains(args) -> int:
+    if args.json:
+        _writable_dir(args.json, "--json")
+    if args.header:
+        if Path(args.header).is_dir():
+            raise InputError(f"--header {args.header}: is a folder")
+    elif not (args.report or args.json or args.check):
+        paths.require_checkout("writing the committed header (or pass --header PATH)")
     d, files = generated_files(args)
     if args.report:
         from rodgains.report import report_text
 
         sys.stdout.write(report_text(d))
+        from rodctl.sim.linear_check import report_lines
+
+        sys.stdout.write("\n".join(report_lines(d)) + "\n")
     if args.check:
         stale = [f for f, text in files.items() if not f.exists() or f.read_text() != text]
         if stale:
@@ -83,12 +109,15 @@ def run_gains(args) -> int:
         print(f"up to date: {', '.join(str(f) for f in files)}")
         return 0
     if args.json:
-        Path(args.json).write_text(json.dumps(d.to_json(), indent=1) + "\n")
+        _write(Path(args.json), json.dumps(d.to_json(), indent=1) + "\n")
         print(f"wrote {args.json}")
     if args.header or not (args.report or args.json):
         for f, text in files.items():
-            f.parent.mkdir(parents=True, exist_ok=True)
-            f.write_text(text)
+            try:
+                f.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as e:
+                raise InputError(f"cannot create {f.parent}: {e.strerror or e}") from None
+            _write(f, text)
         rho = d.checks["closed_loop_spectral_radius"]
         print(f"wrote {', '.join(str(f) for f in files)}  (N={d.N}, {1 / d.dt:g} Hz, "
               f"closed-loop spectral radius {rho:.5f})")
@@ -99,8 +128,9 @@ def run_params(args) -> int:
     text = params_from_args(args).to_toml()
     if args.out:
         if Path(args.out).exists() and not args.force:
-            raise UserError(f"{args.out} exists; pass --force to overwrite")
-        Path(args.out).write_text(text)
+            raise InputError(f"{args.out} exists; pass --force to overwrite")
+        _writable_dir(args.out, "--out")
+        _write(Path(args.out), text)
         print(f"wrote {args.out}")
     else:
         sys.stdout.write(text)

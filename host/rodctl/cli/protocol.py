@@ -20,6 +20,8 @@ def _shown(p: Path, root: Path) -> str:
 def run_protocol(args) -> int:
     from rodctl.link import protocol_gen as gen
 
+    if not args.root:
+        paths.require_checkout("rodctl protocol (without --root)")
     root = Path(args.root) if args.root else paths.REPO
     if not (root / gen.TOML_REL).is_file():
         raise UserError(f"no protocol definition at {root / gen.TOML_REL}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from rodgains.errors import UserError
+from rodgains.errors import InputError, UserError
 
 from rodctl.cli.gains import add_param_args, params_from_args, regenerate_command
 
@@ -24,7 +24,7 @@ def run_sil_lib(args) -> int:
             out.parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(lib, out)
         except OSError as e:
-            raise UserError(f"cannot write {out}: {e.strerror}") from None
+            raise InputError(f"cannot write {out}: {e.strerror}") from None
         lib = out
     print(f"SIL library for N={params.N} at {1.0 / params.dt:g} Hz (parameters {params.sha256()[:16]})")
     print(lib)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rodgains.errors import UserError
+from rodgains.errors import InputError, UserError
 
 from rodctl.cli.gains import add_param_args, params_from_args
 
@@ -43,8 +43,8 @@ class Progress:
 
 
 def write_log(o, trace, path: Path) -> tuple[Path, Path]:
-    """The trace in the device log format (logfile.LogWriter), plus the true state beside it."""
-    from rodctl.logs import logfile
+    """The trace in the device log format (rodctl.logs.LogWriter), plus the true state beside it."""
+    from rodctl import logs as logfile
     from rodctl.link import protocol as P
 
     p = o.params
@@ -53,7 +53,7 @@ def write_log(o, trace, path: Path) -> tuple[Path, Path]:
     meta = logfile.simulator_metadata(p, n=n, source=f"simulator: rodctl sim --scenario {o.name} ({trace.label}"
                                       + ("" if firmware else "; state feedback, theta_hat is the true state") + ")")
     period_us = int(round(p.dt * 1e6))
-    w = logfile.LogWriter(path, meta, n=n)
+    w = logfile.LogWriter(path, meta, n=n, overwrite=True)  # run_one has checked --log against --force
     try:
         est = trace.est if firmware else np.hstack([trace.theta, np.zeros_like(trace.theta)])
         mode = trace.mode if trace.mode is not None else np.full(len(trace.t), 1)
@@ -93,6 +93,10 @@ def summary_lines(o) -> list[str]:
 
 def _outputs(args, name: str, all_mode: bool) -> tuple[Path | None, Path | None]:
     if all_mode:
+        from rodctl.sim.scenarios import SCENARIOS
+
+        if SCENARIOS[name].group == "robustness":  # 27 of them: the table carries their numbers
+            return None, None
         folder = Path(args.figures)
         return folder / f"sim-{name}.png", None
     plot = None if args.no_plot else Path(args.plot or f"sim-{name}.png")
@@ -104,11 +108,15 @@ def run_one(args, name: str, params, all_mode: bool = False):
     from rodctl.sim.scenarios import Options, SCENARIOS
 
     scen = SCENARIOS[name]
+    _, log = _outputs(args, name, all_mode)
+    if log is not None and args.log and not args.force:  # an explicit --log is never replaced silently
+        from rodctl.logs.writer import check_new
+
+        check_new(log)
     prog = Progress(name)
     t0 = time.monotonic()
     try:
-        o = scen.run(Options(params, progress=prog, duration=args.duration, plant_kind=args.plant,
-                             plant_edges=args.edges))
+        o = scen.run(Options(params, progress=prog, duration=args.duration))
     finally:
         prog.done()
     wall = time.monotonic() - t0
@@ -123,6 +131,12 @@ def run_one(args, name: str, params, all_mode: bool = False):
     if log is not None:
         log.parent.mkdir(parents=True, exist_ok=True)
         traces = o.traces
+        if len(traces) > 1 and args.log and not args.force:
+            from rodctl.logs.writer import check_new
+
+            for tr in traces:
+                tag = re.sub(r"[^A-Za-z0-9.]+", "-", tr.label).strip("-")
+                check_new(log.with_name(f"{log.stem}-{tag}{log.suffix}"))
         if len(traces) == 1:
             written += [str(f) for f in write_log(o, traces[0], log)]
         else:
@@ -136,20 +150,25 @@ def table_markdown(outcomes) -> str:
     from rodctl.sim.figures import fmt
     from rodctl.sim.scenarios import SCENARIOS
 
-    rows = ["| scenario | paper | run | settle to 1 deg [s] | overshoot [deg] | peak torque [N m] | swing-up [s] | "
-            "estimate error RMS [deg] | final [deg] | result |",
-            "|---|---|---|---|---|---|---|---|---|---|"]
+    rows = ["| scenario | paper | run | plant | settle to 1 deg [s] | overshoot [deg] | peak torque [N m] | "
+            "swing-up [s] | estimate error RMS [deg] | final [deg] | result |",
+            "|---|---|---|---|---|---|---|---|---|---|---|"]
     for o in outcomes:
         s = SCENARIOS[o.name]
         if o.passed == s.expect_pass:
             verdict = "pass" if o.passed else "**fail** (documented below)"
         else:
             verdict = ("pass" if o.passed else "**fail**") + " (unexpected)"
+        plants = {tr.label: (tr.plant or "paper's model") for tr in o.traces}
         for i, (label, m) in enumerate(o.metrics.items()):
-            rows.append(f"| {o.name if i == 0 else ''} | {s.paper if i == 0 else ''} | {label} | {fmt(m['settle_s'])} | "
+            rows.append(f"| {o.name if i == 0 else ''} | {s.paper if i == 0 else ''} | {label} | {plants.get(label, '')} | "
+                        f"{fmt(m['settle_s'])} | "
                         f"{fmt(m['overshoot_deg'], 1)} | {fmt(m['peak_torque_Nm'], 3)} | {fmt(m['swingup_s'])} | "
                         f"{fmt(m['est_rms_deg'])} | {fmt(m['final_dev_deg'])} | {verdict if i == 0 else ''} |")
-    crit = "\n".join(f"- `{o.name}`: {o.criterion}." for o in outcomes)
+    groups: dict[str, list[str]] = {}  # one line per distinct criterion (27 robust-* share one)
+    for o in outcomes:
+        groups.setdefault(o.criterion, []).append(f"`{o.name}`")
+    crit = "\n".join(f"- {', '.join(names)}: {c}." for c, names in groups.items())
     return "\n".join(rows) + "\n\nPass criteria:\n\n" + crit + "\n"
 
 
@@ -161,7 +180,7 @@ def replace_table(readme: Path, table: str) -> None:
         end = text.index(TABLE_END) + len(TABLE_END)
         text = text[:start] + block + text[end:]
     else:
-        raise UserError(f"{readme}: no scenario-table markers ({TABLE_BEGIN!r} ... {TABLE_END!r}) to replace")
+        raise InputError(f"{readme}: no scenario-table markers ({TABLE_BEGIN!r} ... {TABLE_END!r}) to replace")
     readme.write_text(text)
 
 
@@ -171,19 +190,19 @@ def run_sim(args) -> int:
     if args.list:
         for name, s in SCENARIOS.items():
             mark = " (default)" if name == DEFAULT else ""
-            print(f"{name:15s} {s.paper:7s} {s.title}{mark}")
+            print(f"{name:19s} {s.paper:7s} {s.title}{mark}")
         return 0
-    if args.plant is not None and args.plant not in ("inextensible", "der"):
-        raise UserError(f"--plant {args.plant}: inextensible or der")
-    if args.edges is not None and not 2 <= args.edges <= 64:
-        raise UserError(f"--edges {args.edges}: must be between 2 and 64")
     if args.duration is not None and not 0 < args.duration <= 600:
-        raise UserError(f"--duration {args.duration}: must be in (0, 600] s")
+        raise InputError(f"--duration {args.duration}: must be in (0, 600] s")
     params = params_from_args(args)
+    shorthand = ([f'plant.model="{args.plant}"'] if args.plant is not None else []) + \
+        ([f"plant.edges={args.edges}"] if args.edges is not None else [])
+    if shorthand:  # --plant / --edges: the [plant] table's model and edges, checked like --set
+        params = params.with_overrides(*shorthand)
     names = list(SCENARIOS) if args.all else [args.scenario or DEFAULT]
     for name in names:
         if name not in SCENARIOS:
-            raise UserError(f"unknown scenario {name!r}; one of: {', '.join(SCENARIOS)} (rodctl sim --list)")
+            raise InputError(f"unknown scenario {name!r}; one of: {', '.join(SCENARIOS)} (rodctl sim --list)")
     outcomes, unexpected = [], []
     for name in names:
         o, wall, written = run_one(args, name, params, all_mode=args.all)
@@ -217,8 +236,12 @@ def register(sub) -> None:
     s.add_argument("--log", metavar="PATH", help="log to write, device log format (default: sim-NAME.csv)")
     s.add_argument("--no-plot", action="store_true", help="do not write the figure")
     s.add_argument("--no-log", action="store_true", help="do not write the log")
-    s.add_argument("--plant", metavar="KIND", help="plant for the testbed scenarios: inextensible (default) or der")
-    s.add_argument("--edges", type=int, metavar="N", help="plant edges for the testbed scenarios (default: rod.edges)")
+    s.add_argument("--force", action="store_true", help="replace an existing --log (the default sim-NAME.csv "
+                   "is always replaced, like the figure)")
+    s.add_argument("--plant", metavar="MODEL", help="the faithful plant's model: der or inextensible "
+                   "(shorthand for --set plant.model=MODEL)")
+    s.add_argument("--edges", type=int, metavar="N", help="the faithful plant's edges beyond the hub "
+                   "(shorthand for --set plant.edges=N)")
     s.add_argument("--duration", type=float, metavar="S", help="simulated time [s] (default: the scenario's)")
     s.add_argument("--all", action="store_true", help="run every scenario (figures into --figures, no logs)")
     s.add_argument("--figures", metavar="DIR", default="docs/img", help="with --all: where figures go (docs/img)")

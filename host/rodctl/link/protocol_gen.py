@@ -119,6 +119,14 @@ def header_text(spec: Spec, command: str = COMMAND) -> str:
             note = " ".join(x for x in ((f"[{c.unit}]" if c.unit else ""), c.doc) if x)
             d.define(f"{table.c_prefix}{c.name}", _hex(c.value) if table.key == "msg_type" else f"{c.value}u", note)
         d.define(f"{table.c_prefix}COUNT", f"{len(table.values)}u", "number of codes")
+        for c in table.values:
+            if c.min is None:
+                continue
+            hi = _c_float(c.max) if c.max is not None else None
+            if c.design_max:  # the smaller of the fixed bound and the design's, still a constant expression
+                hi = c.design_max if hi is None else f"({hi} < {c.design_max} ? {hi} : {c.design_max})"
+            d.define(f"{table.c_prefix}{c.name}_MIN", _c_float(c.min), f"[{c.unit}] SET accepts >= this")
+            d.define(f"{table.c_prefix}{c.name}_MAX", hi, f"[{c.unit}] SET accepts <= this")
     for table in spec.flags.values():
         d.text()
         d.text(f"/* ---- {table.key} flags: {table.doc} ---- */")
@@ -242,18 +250,35 @@ def doc_text(spec: Spec, command: str = COMMAND) -> str:
     for t in spec.codes.values():
         L += ["", f"### {t.key}", "", f"{t.doc} C: `{t.c_prefix}*`, Python: `rodctl.link.protocol.{t.python}`.", ""]
         has_unit = any(c.unit for c in t.values)
-        L.append("| code | name |" + (" unit |" if has_unit else "") + " meaning |")
-        L.append("|---:|---|" + ("---|" if has_unit else "") + "---|")
+        has_range = any(c.min is not None for c in t.values)
+        L.append("| code | name |" + (" unit |" if has_unit else "") + (" range |" if has_range else "") + " meaning |")
+        L.append("|---:|---|" + ("---|" if has_unit else "") + ("---|" if has_range else "") + "---|")
         for c in t.values:
             num = f"{c.value:#04x}" if t.key == "msg_type" else str(c.value)
             unit = f" {_md_escape(c.unit)} |" if has_unit else ""
-            L.append(f"| {num} | {c.name} |{unit} {_md_escape(c.doc)} |")
+            rng = f" {_md_escape(_range_text(c))} |" if has_range else ""
+            L.append(f"| {num} | {c.name} |{unit}{rng} {_md_escape(c.doc)} |")
     for t in spec.flags.values():
         L += ["", f"### {t.key} flags", "", f"{t.doc} C: `{t.c_prefix}*`, Python: `rodctl.link.protocol.{t.python}`.", "",
               "| bit | mask | name | meaning |", "|---:|---:|---|---|"]
         for c in t.values:
             L.append(f"| {c.value} | {1 << c.value:#04x} | {c.name} | {_md_escape(c.doc)} |")
     return "\n".join(L) + "\n"
+
+
+def _c_float(v: float) -> str:
+    """A C float literal that reads back as the float32 nearest v."""
+    return f"{v:.9g}" + ("" if any(ch in f"{v:.9g}" for ch in ".e") else ".0") + "f"
+
+
+def _range_text(c) -> str:
+    if c.min is None:
+        return ""
+    hi = [f"{c.max:.6g}"] if c.max is not None else []
+    if c.design_max:
+        hi.append(f"`{c.design_max}`")
+    top = hi[0] if len(hi) == 1 else f"min({', '.join(hi)})"
+    return f"{c.min:.6g} .. {top}"
 
 
 def generated_files(root: Path, spec: Spec | None = None) -> dict[Path, str]:

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import hashlib
 import re
-import tomllib
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -17,7 +16,12 @@ from rodgains.errors import UserError
 
 from rodctl import paths
 
-SPEC_PATH = paths.FIRMWARE / "protocol" / "rodlink.toml"
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+SPEC_PATH = paths.SPEC
 
 # wire type -> (struct code, size in bytes, C type)
 TYPES = {
@@ -44,6 +48,9 @@ class Code:
     doc: str = ""
     unit: str = ""
     integer: bool = False
+    min: float | None = None  # physical range of a SET parameter, inclusive, in `unit`
+    max: float | None = None
+    design_max: str | None = None  # rod_gains.h macro that lowers max (e.g. ROD_TORQUE_MAX_NM)
 
 
 @dataclass(frozen=True)
@@ -184,6 +191,15 @@ def _get(d: dict, key: str, kind, where: str, default=None, required=True):
     return v
 
 
+def _number(d: dict, key: str, where: str) -> float | None:
+    v = d.get(key)
+    if v is None:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or v != v or abs(v) == float("inf"):
+        raise _err(where, f"{key!r} must be a finite number")
+    return float(v)
+
+
 def _check_keys(d: dict, allowed: set[str], where: str) -> None:
     extra = sorted(set(d) - allowed)
     if extra:
@@ -197,7 +213,8 @@ def _code_table(key: str, d: dict, is_flags: bool) -> CodeTable:
     out, names, nums = [], set(), set()
     for i, c in enumerate(_get(d, list_key, list, where)):
         w = f"{where}.{list_key}[{i}]"
-        _check_keys(c, {"name", "bit" if is_flags else "value", "doc", "unit", "integer"}, w)
+        _check_keys(c, {"name", "bit" if is_flags else "value", "doc", "unit", "integer", "min", "max",
+                        "design_max"}, w)
         name = _get(c, "name", str, w)
         value = _get(c, "bit" if is_flags else "value", int, w)
         if not _UPPER.match(name):
@@ -208,8 +225,14 @@ def _code_table(key: str, d: dict, is_flags: bool) -> CodeTable:
             raise _err(w, f"{value} does not fit a u8{' bit' if is_flags else ''}")
         names.add(name)
         nums.add(value)
+        lo, hi = (_number(c, k, w) for k in ("min", "max"))
+        design_max = _get(c, "design_max", str, w, None, False)
+        if design_max is not None and not _UPPER.match(design_max):
+            raise _err(w, f"design_max {design_max!r} must name a rod_gains.h macro")
+        if (lo is None) != (hi is None and design_max is None) or (lo is not None and hi is not None and not lo < hi):
+            raise _err(w, "a range needs min and max (or design_max), with min < max")
         out.append(Code(name, value, _get(c, "doc", str, w, "", False), _get(c, "unit", str, w, "", False),
-                        _get(c, "integer", bool, w, False, False)))
+                        _get(c, "integer", bool, w, False, False), lo, hi, design_max))
     return CodeTable(key, _get(d, "doc", str, where, "", False), _get(d, "c_prefix", str, where),
                      _get(d, "python", str, where), tuple(out), is_flags)
 

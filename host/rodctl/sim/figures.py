@@ -36,14 +36,17 @@ def make_figure(o: Outcome, snapshots: int = 6):
     gs = fig.add_gridspec(rows, snapshots, height_ratios=[1.3] + [1] * (rows - 1))
     fig.suptitle(f"{o.name}: {o.title}\n{'PASS' if o.passed else 'FAIL'}: {o.criterion}", fontsize=10)
 
-    L = max(tr.edge_length * tr.theta.shape[1] for tr in o.traces)
+    def lengths(tr):  # edge lengths [m]: a faithful plant's hub differs from its other edges
+        return np.diff(tr.node_arc) if tr.node_arc is not None else tr.edge_length
+
+    L = max(float(np.sum(np.broadcast_to(lengths(tr), tr.theta.shape[1:]))) for tr in o.traces)
     ref = o.traces[0]
     idx = snapshot_times(ref, snapshots)
     for j, k in enumerate(idx):
         ax = fig.add_subplot(gs[0, j])
         for c, tr in enumerate(o.traces):
             kk = min(k, len(tr.t) - 1)
-            x, y = shape_nodes(tr.theta[kk], tr.edge_length)
+            x, y = shape_nodes(tr.theta[kk], lengths(tr))
             ax.plot(x, y, "-o", ms=2, lw=1.6, color=COLORS[c % len(COLORS)], label=tr.label if j == 0 else None)
             if tr.est is not None and tr.mode is not None and tr.mode[kk] == 1:
                 n = tr.est.shape[1] // 2
@@ -83,7 +86,7 @@ def make_figure(o: Outcome, snapshots: int = 6):
         ax_e = fig.add_subplot(gs[3, :], sharex=ax_th)
         tr = firmware[0]
         n = tr.est.shape[1] // 2
-        err = np.degrees(np.mod(tr.est[:, :n] - resample_edges(tr.theta, n) + np.pi, 2 * np.pi) - np.pi)
+        err = np.degrees(np.mod(tr.est[:, :n] - resample_edges(tr.theta, n, tr.node_arc) + np.pi, 2 * np.pi) - np.pi)
         err[tr.mode != 1] = np.nan
         for i in range(n):
             ax_e.plot(tr.t, err[:, i], lw=0.8, label=f"edge {i + 1}")

@@ -57,7 +57,7 @@ KINDS = {"inextensible": 0, "der": 1}
 INPUTS = {"torque": 0, "duty": 1}
 METHODS = {"ros2": 0, "rk4": 1, "verlet": 2}
 SIL_ABI_VERSION = 1
-MODE_NAMES = {0: "DISARMED", 1: "BALANCE", 2: "SWING_UP", 3: "FAULT", 4: "CATCH"}
+MODE_NAMES = {0: "DISARMED", 1: "BALANCE", 2: "SWING_UP", 3: "FAULT", 4: "CATCH", 5: "IDENTIFY"}
 
 ROS2_ACCURACY = 0.1  # ROS2: h * omega_osc
 RK4_ACCURACY = 0.5  # RK4: h * omega_osc
@@ -92,6 +92,12 @@ class _Config(ctypes.Structure):
         ("counts_per_rev", _D),
         ("encoder_phase", _D),
         ("max_step", _D),
+        ("hub_length", _D),
+        ("hub_mass", _D),
+        ("hub_stiffness", _D),
+        ("hub_damping", _D),
+        ("coulomb", _D),
+        ("coulomb_rate", _D),
     ]
 
 
@@ -174,6 +180,7 @@ def library() -> ctypes.CDLL:
         "rod_plant_last_torque": (_D, [vp]),
         "rod_plant_last_current": (_D, [vp]),
         "rod_plant_encoder": (i32, [vp]),
+        "rod_plant_set_external_torque": (None, [vp, _D]),
         "rod_plant_encoder_count": (i32, [vp, _D]),
         "rod_run_closed_loop": (ctypes.c_int64, [vp, _P(_SilApi), _P(_RunOptions), _P(_RunLog), _P(_RunResult)]),
     }
@@ -181,7 +188,7 @@ def library() -> ctypes.CDLL:
         f = getattr(lib, name)
         f.restype = res
         f.argtypes = args
-    if lib.rod_plant_api_version() != 1:
+    if lib.rod_plant_api_version() != 2:
         raise UserError("rod_plant library API version mismatch")
     return lib
 
@@ -225,6 +232,12 @@ class PlantConfig:
     current_limit: float
     counts_per_rev: float
     encoder_phase: float
+    hub_length: float  # edge 1, clamped in the hub [m]
+    hub_mass: float  # [kg]
+    hub_stiffness: float  # joint between edge 1 and 2 [N m/rad]
+    hub_damping: float  # [N m s/rad]
+    coulomb: float = 0.0  # Coulomb friction at the shaft [N m]
+    coulomb_rate: float = 0.01  # its tanh smoothing rate [rad/s]: below 80 % of breakaway the shaft creeps < 0.011 rad/s
 
     @property
     def back_emf_damping(self) -> float:
@@ -234,7 +247,9 @@ class PlantConfig:
     def to_c(self, max_step: float, method: str) -> _Config:
         return _Config(KINDS[self.kind], self.edges, INPUTS[self.input_mode], METHODS[method], self.l, self.m,
                        self.EI, self.EA, self.d, self.g, self.J, self.b, self.kt_out, self.ke_out, self.resistance,
-                       self.supply_voltage, self.current_limit, self.counts_per_rev, self.encoder_phase, max_step)
+                       self.supply_voltage, self.current_limit, self.counts_per_rev, self.encoder_phase, max_step,
+                       self.hub_length, self.hub_mass, self.hub_stiffness, self.hub_damping, self.coulomb,
+                       self.coulomb_rate)
 
 
 class Plant:
@@ -249,12 +264,17 @@ class Plant:
     method: "auto" (default), or "ros2" / "rk4" (inextensible), "verlet" (DER).
     step: integrator step bound [s]; None picks it from the model (see module doc).
     period: the control period the automatic choice is costed for (default Params.dt).
+    hub_length: None (default) is the paper's model: edge 1 of N equal edges is the clamped one. A
+    length [m] makes the faithful rod (faithful_plant): a rigid hub edge of that length (independent of
+    N), then `edges` flexible edges over the rest; N (the coordinates) is then edges + 1. Its joints
+    carry the continuum's bending stiffness and damping per Voronoi length (see hub_joint).
+    coulomb: Coulomb friction at the shaft [N m] (default 0: the paper's model has none).
     """
 
     def __init__(self, params: Params | None = None, *, kind: str = "inextensible", edges: int | None = None,
                  input_mode: str = "torque", phase: float = 0.5, J: float | None = None, b: float | None = None,
                  d: float | None = None, g: float | None = None, method: str = "auto", step: float | None = None,
-                 period: float | None = None):
+                 period: float | None = None, hub_length: float | None = None, coulomb: float = 0.0):
         if kind not in KINDS:
             raise ValueError(f"kind must be one of {sorted(KINDS)}, got {kind!r}")
         if input_mode not in INPUTS:
@@ -267,13 +287,27 @@ class Plant:
             raise ValueError("phase must be in [0, 1)")
         rod = RodModel.from_params(p, design=False, edges=N)  # the physical rod and motor, whatever the design
         self.params = p
+        self.hub = hub_length
+        if coulomb < 0:
+            raise ValueError("coulomb must be >= 0")
+        if hub_length is None:  # the paper's model
+            geo = dict(l=rod.l, m=rod.m, d=rod.d if d is None else float(d), hub_length=rod.l, hub_mass=rod.m,
+                       hub_stiffness=rod.EI / rod.l, hub_damping=rod.d if d is None else float(d))
+        else:
+            L = p["rod"]["length"]
+            if not 0 <= hub_length < L:
+                raise ValueError(f"hub_length must be in [0, {L:g}) m")
+            geo = hub_geometry(p, N, float(hub_length), d)
+            N += 1
         self.config = PlantConfig(
-            kind=kind, edges=N, input_mode=input_mode, l=rod.l, m=rod.m,
-            EI=rod.EI, EA=p.EA, d=rod.d if d is None else float(d), g=rod.g if g is None else float(g),
+            kind=kind, edges=N, input_mode=input_mode, l=geo["l"], m=geo["m"],
+            EI=rod.EI, EA=p.EA, d=geo["d"], g=rod.g if g is None else float(g),
             J=rod.J if J is None else float(J), b=rod.b if b is None else float(b),
             kt_out=p.kt_out, ke_out=p.ke_out, resistance=p["motor"]["resistance"],
             supply_voltage=p["driver"]["supply_voltage"], current_limit=p["driver"]["current_limit"],
-            counts_per_rev=float(p.counts_per_rev), encoder_phase=float(phase))
+            counts_per_rev=float(p.counts_per_rev), encoder_phase=float(phase), hub_length=geo["hub_length"],
+            hub_mass=geo["hub_mass"], hub_stiffness=geo["hub_stiffness"], hub_damping=geo["hub_damping"],
+            coulomb=float(coulomb))
         self._lib = library()
         cfg = self.config.to_c(1e-4, "verlet" if kind == "der" else "ros2")
         self._h = self._lib.rod_plant_new(ctypes.byref(cfg))
@@ -342,8 +376,10 @@ class Plant:
         self._lib.rod_plant_set_time(self._h, float(t))
 
     def model(self):
-        """The Python reference model with this plant's values (RodModel or DERModel)."""
+        """The Python reference model with this plant's values (RodModel or DERModel); the paper's model only."""
         c = self.config
+        if self.hub is not None:
+            raise NotImplementedError("no Python reference model for a plant with a hub (faithful_plant)")
         if c.kind == "der":
             return DERModel(N=c.edges, l=c.l, m=c.m, EI=c.EI, EA=c.EA, d=c.d, g=c.g, J=c.J, b=c.b)
         return RodModel(N=c.edges, l=c.l, m=c.m, EI=c.EI, d=c.d, g=c.g, J=c.J, b=c.b)
@@ -379,6 +415,33 @@ class Plant:
         xy = np.empty(2 * (self.N + 1))
         self._lib.rod_plant_nodes(self._h, _ptr(xy, _D))
         return xy.reshape(-1, 2)
+
+    def label(self) -> str:
+        """Which plant this is, for tables: "der, 20 edges + 10 mm hub" or "paper's inextensible N = 5 model"."""
+        c = self.config
+        if self.hub is None:
+            return f"paper's {c.kind} N = {c.edges} model"
+        return f"{c.kind}, {c.edges - 1} edges + {1e3 * c.hub_length:g} mm hub"
+
+    def edge_lengths(self) -> np.ndarray:
+        """Length of each edge, hub first [m]."""
+        out = np.full(self.N, self.config.l)
+        out[0] = self.config.hub_length
+        return out
+
+    def node_arc(self) -> np.ndarray:
+        """Arc length of each node from the axis, nodes 0..N [m] (straight rod)."""
+        return np.concatenate([[0.0], np.cumsum(self.edge_lengths())])
+
+    @property
+    def external_torque(self) -> float:
+        """An external torque on the shaft [N m] (a disturbance), held until changed."""
+        return getattr(self, "_ext", 0.0)
+
+    @external_torque.setter
+    def external_torque(self, value: float) -> None:
+        self._ext = float(value)
+        self._lib.rod_plant_set_external_torque(self._h, self._ext)
 
     def energy(self) -> float:
         """Kinetic + elastic + gravitational energy [J], gravity zero at the axis."""
@@ -438,9 +501,10 @@ class Plant:
         self.set_raw_state(*keep)
         return np.concatenate([q, qd])
 
-    def linearization(self, theta: float) -> np.ndarray:
-        """Jacobian of deriv (zero input) at a straight rod at rest at angle theta (central differences)."""
-        y0 = self.rest_state(theta)
+    def linearization(self, theta: float, y0: np.ndarray | None = None, rel_step: float = 1e-6) -> np.ndarray:
+        """Jacobian of deriv (zero input) at a straight rod at rest at angle theta, or at the raw state y0
+        (central differences, steps rel_step times the coordinate's scale)."""
+        y0 = self.rest_state(theta) if y0 is None else np.asarray(y0, float)
         n2 = y0.size
         scale = np.ones(n2)
         if self.kind == "der":
@@ -448,7 +512,7 @@ class Plant:
         A = np.empty((n2, n2))
         for k in range(n2):
             e = np.zeros(n2)
-            e[k] = 1e-6 * scale[k]
+            e[k] = rel_step * scale[k]
             A[:, k] = (self.deriv(y0 + e) - self.deriv(y0 - e)) / (2 * e[k])
         return A
 
@@ -506,6 +570,37 @@ def choose_integrator(plant: Plant, method: str = "auto", period: float = 1e-3) 
         method = "rk4" if n_rk4 <= n_ros2 else "ros2"
     return {"method": method, "step": h_rk4 if method == "rk4" else h_ros2, "omega_osc": w_osc, "rho": rho,
             "steps_per_period": {"ros2": n_ros2, "rk4": n_rk4}}
+
+
+DAMPING_REFERENCE_EDGES = 5  # rod.damping is the joint damping of Table I's N = 5 rod
+
+
+def hub_geometry(p: Params, edges: int, hub_length: float, d: float | None = None) -> dict[str, float]:
+    """Edge length, masses and joint constants of the faithful rod: a rigid hub of hub_length [m], then
+    `edges` flexible edges of l = (L - hub) / edges.
+
+    Bending: E I kappa^2 / 2 integrated per Voronoi length gives EI / l at the interior joints; the
+    clamp sits at the hub's end and edge 2's angle belongs to its midpoint, half an edge away, so
+    the hub joint carries EI / (l / 2). The rod's damping is Kelvin-Voigt like its stiffness: the
+    per-joint value d of Table I's N = 5 rod (Voronoi length L / 5) becomes d (L / 5) / l_Voronoi,
+    so the dissipation converges as N grows instead of vanishing (a constant d per joint dissipates
+    ~ d l^2 kappa_dot^2 per joint, which goes to 0 with l)."""
+    r = p["rod"]
+    L = r["length"]
+    l = (L - hub_length) / edges
+    rho_A = r["density"] * r["width"] * r["thickness"]
+    dd = r["damping"] if d is None else float(d)
+    c = dd * L / DAMPING_REFERENCE_EDGES  # continuum damping [N m^2 s]
+    return dict(l=l, m=rho_A * l, d=c / l, hub_length=hub_length, hub_mass=rho_A * hub_length,
+                hub_stiffness=2.0 * p.EI / l, hub_damping=2.0 * c / l)
+
+
+def faithful_plant(params: Params, *, input_mode: str = "duty", phase: float = 0.5, **kw) -> Plant:
+    """The plant the parameter file's [plant] table describes (model, edges, hub_length), with the
+    physical motor (rotor inertia, viscous and Coulomb friction): what every pass/fail scenario judges."""
+    pp = params["plant"]
+    return Plant(params, kind=pp["model"], edges=pp["edges"], input_mode=input_mode, phase=phase,
+                 hub_length=pp["hub_length"], coulomb=params["motor"]["coulomb_friction"], **kw)
 
 
 # --- controller (firmware SIL library) ---------------------------------------------------------

@@ -85,8 +85,10 @@ struct rod_plant {
     double pending; /* delayed input held by the runner */
     int prepared;   /* DER: Fc and Cb hold the values at q */
     /* constants */
-    double ml2, mgl, ks; /* m l^2, m g l, EI / l */
-    double *cc;          /* inextensible: N + 1/2 - i; DER: node masses m_0..m_N */
+    double *lv;          /* edge lengths: hub_length, then l [m] */
+    double *ksj, *dj;    /* per joint (between edges j and j+1): bending stiffness [N m/rad], damping [N m s/rad] */
+    double ext;          /* external torque on the shaft [N m] */
+    double *cc;          /* inextensible: node mass beyond edge i [kg]; DER: node masses m_0..m_N */
     double *md;          /* DER mass diagonal */
     /* inextensible workspace */
     double *s, *c, *s2, *c2, *F, *F2, *kj, *ta, *tb, *tc, *td;
@@ -129,6 +131,24 @@ static double motor(const rod_plant *p, double u, double omega, double *current,
     return k->kt_out * i;
 }
 
+/* Coulomb friction torque opposing omega, smoothed over coulomb_rate so the integrators see a
+ * Lipschitz force instead of a switch: stiction becomes a creep (at 80 % of the breakaway torque
+ * the shaft turns at 1.1 coulomb_rate). 5 mN m over 0.01 rad/s is a 0.5 N m s/rad slope, 0.4 ms
+ * with the reflected rotor: ROS2 takes the slope into its implicit part; the DER's Verlet steps
+ * (< 0.2 ms) and RK4 (the paper's model has no Coulomb friction) resolve it explicitly.
+ * *slope = its derivative. */
+static inline double coulomb(const rod_plant *p, double omega, double *slope)
+{
+    const double tc = p->cfg.coulomb;
+    if (!(tc > 0.0)) {
+        if (slope) *slope = 0.0;
+        return 0.0;
+    }
+    const double th = tanh(omega / p->cfg.coulomb_rate);
+    if (slope) *slope = tc * (1.0 - th * th) / p->cfg.coulomb_rate;
+    return tc * th;
+}
+
 double rod_plant_motor_torque(const rod_plant *p, double input, double omega, double *current)
 {
     double cur, slope;
@@ -156,11 +176,11 @@ HOT void trig(const double *th, double *s, double *c, const int N)
 HOT void rod_force(rod_plant *p, const int N, const double *s, const double *c, const double *w, double torque,
                    double *F, double *kj)
 {
-    const double *cc = p->cc;
+    const double *cc = p->cc, *lv = p->lv, *ksj = p->ksj, *dj = p->dj;
     double *a = p->ta, *b = p->tb, *A = p->tc, *B = p->td;
     double Qa = 0.0, Qb = 0.0;
     for (int i = N - 1; i >= 0; i--) {
-        const double w2 = w[i] * w[i];
+        const double w2 = w[i] * w[i] * lv[i];
         a[i] = w2 * c[i];
         b[i] = w2 * s[i];
         A[i] = Qa;
@@ -168,36 +188,36 @@ HOT void rod_force(rod_plant *p, const int N, const double *s, const double *c, 
         Qa += cc[i] * a[i];
         Qb += cc[i] * b[i];
     }
-    const double ml2 = p->ml2, mgl = p->mgl, ks = p->ks, d = p->cfg.d;
+    const double g = p->cfg.g;
     double Pa = 0.0, Pb = 0.0;
     for (int i = 0; i < N; i++) {
         Pa += a[i];
         Pb += b[i];
         const double Ai = A[i] + cc[i] * Pa, Bi = B[i] + cc[i] * Pb;
-        F[i] = -ml2 * (s[i] * Ai - c[i] * Bi) - mgl * cc[i] * s[i];
+        F[i] = -lv[i] * ((s[i] * Ai - c[i] * Bi) + g * cc[i] * s[i]);
     }
     for (int j = 0; j < N - 1; j++) {
         const double cp = c[j + 1] * c[j] + s[j + 1] * s[j]; /* cos(phi_j) */
         const double sp = s[j + 1] * c[j] - c[j + 1] * s[j]; /* sin(phi_j) */
         const double t = sp / (1.0 + cp);                      /* tan(phi_j / 2) */
         const double tt = t * t;
-        const double f = 2.0 * ks * t * (1.0 + tt) + d * (w[j + 1] - w[j]);
+        const double f = 2.0 * ksj[j] * t * (1.0 + tt) + dj[j] * (w[j + 1] - w[j]);
         F[j] += f;
         F[j + 1] -= f;
-        if (kj) kj[j] = ks * (1.0 + tt) * (1.0 + 3.0 * tt);
+        if (kj) kj[j] = ksj[j] * (1.0 + tt) * (1.0 + 3.0 * tt);
     }
-    F[0] += torque - p->cfg.b * w[0];
+    F[0] += torque - p->cfg.b * w[0] - coulomb(p, w[0], NULL) + p->ext;
 }
 
-/* y = M(theta) x in O(N): M_ij = m l^2 c_max(i,j) (c_i c_j + s_i s_j) + J [i = j = 1]. */
+/* y = M(theta) x in O(N): M_ij = l_i l_j c_max(i,j) (c_i c_j + s_i s_j) + J [i = j = 1]. */
 HOT void rod_mass_mul(rod_plant *p, const int N, const double *s, const double *c, const double *x, double *y)
 {
-    const double *cc = p->cc;
+    const double *cc = p->cc, *lv = p->lv;
     double *a = p->ta, *b = p->tb, *A = p->tc, *B = p->td;
     double Qa = 0.0, Qb = 0.0;
     for (int i = N - 1; i >= 0; i--) {
-        a[i] = c[i] * x[i];
-        b[i] = s[i] * x[i];
+        a[i] = lv[i] * c[i] * x[i];
+        b[i] = lv[i] * s[i] * x[i];
         A[i] = Qa;
         B[i] = Qb;
         Qa += cc[i] * a[i];
@@ -207,7 +227,7 @@ HOT void rod_mass_mul(rod_plant *p, const int N, const double *s, const double *
     for (int i = 0; i < N; i++) {
         Pa += a[i];
         Pb += b[i];
-        y[i] = p->ml2 * (c[i] * (A[i] + cc[i] * Pa) + s[i] * (B[i] + cc[i] * Pb));
+        y[i] = lv[i] * (c[i] * (A[i] + cc[i] * Pa) + s[i] * (B[i] + cc[i] * Pb));
     }
     y[0] += p->cfg.J * x[0];
 }
@@ -218,8 +238,8 @@ static void rod_mass_upper(const rod_plant *p, const double *s, const double *c,
     const int N = p->N;
     for (int i = 0; i < N; i++) {
         double *Mi = M + (size_t)i * N;
-        const double si = s[i] * p->ml2, ci = c[i] * p->ml2;
-        for (int j = i; j < N; j++) Mi[j] = p->cc[j] * (ci * c[j] + si * s[j]);
+        const double si = s[i] * p->lv[i], ci = c[i] * p->lv[i];
+        for (int j = i; j < N; j++) Mi[j] = p->cc[j] * p->lv[j] * (ci * c[j] + si * s[j]);
     }
     M[0] += p->cfg.J;
 }
@@ -249,12 +269,12 @@ HOT void joint_mul(const double *kj, const double *x, double *y, const int N)
  * factor pass (inertias) is shared by every right-hand side. M itself carries J as arm_1. */
 HOT void node_positions(const rod_plant *p, const int N, const double *s, const double *c, double *P)
 {
-    const double l = p->cfg.l;
+    const double *lv = p->lv;
     double x = 0.0, y = 0.0;
     P[0] = P[1] = 0.0;
     for (int k = 0; k < N; k++) {
-        x += l * s[k];
-        y -= l * c[k];
+        x += lv[k] * s[k];
+        y -= lv[k] * c[k];
         P[2 * k + 2] = x;
         P[2 * k + 3] = y;
     }
@@ -371,16 +391,17 @@ HOT int rod_step_n(rod_plant *p, const int N, double u, double h, double *Tsum, 
 {
     double *th = p->q, *w = p->v;
     double *s = p->s, *c = p->c, *kj = p->kj, *arm = p->arm;
-    const double gh = ROD_GAMMA * h, d = p->cfg.d;
-    double cur, slope;
+    const double gh = ROD_GAMMA * h, *dj = p->dj;
+    double cur, slope, cslope;
 
     /* stage 1 at y_n: factor S = M + gh D + gh^2 K (joint space) */
     trig(th, s, c, N);
     const double T1 = motor(p, u, w[0], &cur, &slope);
     rod_force(p, N, s, c, w, T1, p->F, kj);
     node_positions(p, N, s, c, p->fS.P);
-    arm[0] = p->cfg.J + gh * (p->cfg.b + slope);
-    for (int k = 1; k < N; k++) arm[k] = gh * d + gh * gh * kj[k - 1];
+    coulomb(p, w[0], &cslope);
+    arm[0] = p->cfg.J + gh * (p->cfg.b + slope + cslope);
+    for (int k = 1; k < N; k++) arm[k] = gh * dj[k - 1] + gh * gh * kj[k - 1];
     double *k1q = p->k1q, *k1v = p->k1v, *k2q = p->k2q, *k2v = p->k2v, *tmp = p->r2, *us = p->ta2;
     joint_mul(kj, w, tmp, N);
     for (int i = 0; i < N; i++) k1v[i] = p->F[i] - gh * tmp[i];
@@ -523,11 +544,11 @@ static inline int node_index(int k) { return 1 + 2 * (k - 2); } /* k >= 2 */
 static void der_geometry(const rod_plant *p, const double *q, double *X, double *E)
 {
     const int N = p->N;
-    const double l = p->cfg.l;
+    const double l0 = p->cfg.hub_length;
     X[0] = 0.0;
     X[1] = 0.0;
-    X[2] = l * sin(q[0]);
-    X[3] = -l * cos(q[0]);
+    X[2] = l0 * sin(q[0]);
+    X[3] = -l0 * cos(q[0]);
     for (int k = 2; k <= N; k++) {
         X[2 * k] = q[node_index(k)];
         X[2 * k + 1] = q[node_index(k) + 1];
@@ -552,10 +573,10 @@ static inline void band_add(double *B, int i, int j, double val)
 static void der_prepare(rod_plant *p, const double *q, double *Fc, double *Cb)
 {
     const int N = p->N, n = p->n;
-    const double l = p->cfg.l, EA = p->cfg.EA, EI_l = p->ks, d = p->cfg.d, g = p->cfg.g;
+    const double l = p->cfg.l, EA = p->cfg.EA, g = p->cfg.g, *ksj = p->ksj;
     double *X = p->X, *E = p->E, *ge = p->ge, *rr = p->rr, *rl = p->rl;
     der_geometry(p, q, X, E);
-    const double tx = l * cos(q[0]), ty = l * sin(q[0]); /* d x_1 / d phi */
+    const double tx = p->cfg.hub_length * cos(q[0]), ty = p->cfg.hub_length * sin(q[0]); /* d x_1 / d phi */
     double *irr = rr;                                    /* 1 / |e|^2 */
     double *ir = rl;                                     /* 1 / |e| */
     for (int k = 0; k < N; k++) {
@@ -578,7 +599,7 @@ static void der_prepare(rod_plant *p, const double *q, double *Fc, double *Cb)
         const double sd = 1.0 / (ir[j] * ir[j + 1]) + ax * bx + ay * by;
         const double isd = 1.0 / sd;
         const double kap = 2.0 * cr * isd;
-        const double f = EI_l * kap * 2.0 * isd * isd;
+        const double f = ksj[j] * kap * 2.0 * isd * isd;
         const double dsax = ra * ax + bx, dsay = ra * ay + by;
         const double dsbx = rb * bx + ax, dsby = rb * by + ay;
         /* dk/da = 2 (-perp(b) s - c ds/da) / s^2, dk/db = 2 (perp(a) s - c ds/db) / s^2, perp(v) = (-vy, vx) */
@@ -605,8 +626,10 @@ static void der_prepare(rod_plant *p, const double *q, double *Fc, double *Cb)
      * d omega_k / d x_k = perp(e_k) / |e_k|^2 = -d omega_k / d x_{k-1}. */
     memset(Cb, 0, sizeof(double) * (size_t)n * DER_BW);
     Cb[0] = p->cfg.b;
-    if (d > 0.0) {
+    {
         for (int j = 1; j <= N - 1; j++) { /* 1-based edges j, j+1 meet at node j */
+            const double d = p->dj[j - 1];
+            if (!(d > 0.0)) continue;
             const double pax = -E[2 * (j - 1) + 1] * irr[j - 1], pay = E[2 * (j - 1)] * irr[j - 1];
             const double pbx = -E[2 * j + 1] * irr[j], pby = E[2 * j] * irr[j];
             /* node j-1: +pa; node j: -(pa + pb); node j+1: +pb */
@@ -721,6 +744,7 @@ static int der_step(rod_plant *p, double u, double h, double *Tsum, double *Isum
     int err = band_ldl(Ab, n);
     if (err) return err;
     for (int i = 0; i < n; i++) x[i] = md[i] * v[i] + hh * Fc[i];
+    x[0] += hh * (p->ext - coulomb(p, v[0], NULL)); /* explicit: slow next to the step (see coulomb) */
     double T, cur;
     if (k->input_mode == ROD_INPUT_TORQUE) {
         T = u;
@@ -751,7 +775,7 @@ static int der_step(rod_plant *p, double u, double h, double *Tsum, double *Isum
     p->prepared = 1;
     band_mul(Cb, vh, x, n);
     for (int i = 0; i < n; i++) v[i] = vh[i] + hh * (Fc[i] - x[i]) / md[i];
-    v[0] += hh * T / md[0];
+    v[0] += hh * (T + p->ext - coulomb(p, vh[0], NULL)) / md[0];
     *Tsum += T;
     *Isum += cur;
     return ROD_OK;
@@ -767,7 +791,10 @@ static int config_ok(const rod_plant_config *k)
     if (k->edges < 2 || k->edges > ROD_MAX_EDGES) return 0;
     if (k->input_mode != ROD_INPUT_TORQUE && k->input_mode != ROD_INPUT_DUTY) return 0;
     if (!(k->l > 0 && k->m > 0 && k->EI > 0 && k->d >= 0 && k->g >= 0 && k->J >= 0 && k->b >= 0)) return 0;
-    if (k->kind == ROD_PLANT_DER && !(k->EA > 0)) return 0;
+    if (k->kind == ROD_PLANT_DER && !(k->EA > 0 && k->hub_length > 0)) return 0;
+    if (!(k->hub_length >= 0 && k->hub_mass >= 0 && k->hub_stiffness > 0 && k->hub_damping >= 0)) return 0;
+    if (!(k->hub_length > 0 || k->J > 0)) return 0; /* a massless shaft with no hub: M is singular */
+    if (!(k->coulomb >= 0 && (k->coulomb == 0 || k->coulomb_rate > 0))) return 0;
     if (!(k->kt_out > 0 && k->ke_out >= 0 && k->resistance > 0 && k->supply_voltage >= 0 && k->current_limit > 0))
         return 0;
     if (!(k->counts_per_rev > 0 && k->encoder_phase >= 0 && k->encoder_phase < 1)) return 0;
@@ -789,6 +816,7 @@ rod_plant *rod_plant_new(const rod_plant_config *cfg)
     nd += (size_t)N + 1;                  /* cc */
     nd += (size_t)n;                      /* md */
     nd += 21 * (size_t)N;                 /* inextensible vectors, s .. mn */
+    nd += 3 * (size_t)N;                  /* lv, ksj, dj */
     nd += 2 * (6 * (size_t)N + 2);        /* two ABA factors */
     nd += 2 * (size_t)n * DER_BW;         /* Cb, Ab */
     nd += 4 * (size_t)n;                  /* Fc, x, w, vh */
@@ -832,6 +860,9 @@ rod_plant *rod_plant_new(const rod_plant_config *cfg)
     TAKE(p->ta2, N);
     TAKE(p->arm, N);
     TAKE(p->mn, N);
+    TAKE(p->lv, N);
+    TAKE(p->ksj, N);
+    TAKE(p->dj, N);
     TAKE(p->fS.U, 3 * (size_t)N);
     TAKE(p->fS.invD, N);
     TAKE(p->fS.P, 2 * (size_t)N + 2);
@@ -851,26 +882,34 @@ rod_plant *rod_plant_new(const rod_plant_config *cfg)
     TAKE(p->rl, N);
     TAKE(p->tmp, 4 * n);
 #undef TAKE
-    p->ml2 = cfg->m * cfg->l * cfg->l;
-    p->mgl = cfg->m * cfg->g * cfg->l;
-    p->ks = cfg->EI / cfg->l;
+    /* edge 1 is the hub (lumped: half its mass on the axis, half at its end); edges 2..N are l long */
+    for (int i = 0; i < N; i++) {
+        p->lv[i] = i == 0 ? cfg->hub_length : cfg->l;
+        p->ksj[i] = i == 0 ? cfg->hub_stiffness : cfg->EI / cfg->l;
+        p->dj[i] = i == 0 ? cfg->hub_damping : cfg->d;
+    }
     if (cfg->kind == ROD_PLANT_INEXTENSIBLE) {
-        for (int i = 0; i < N; i++) {
-            p->cc[i] = N + 0.5 - (i + 1);
-            p->mn[i] = cfg->m;
-        }
+        for (int i = 0; i < N; i++) p->mn[i] = cfg->m; /* node i + 1 */
+        p->mn[0] = 0.5 * (cfg->hub_mass + cfg->m);
         p->mn[N - 1] = 0.5 * cfg->m;
+        double sum = 0.0;
+        for (int i = N - 1; i >= 0; i--) {
+            sum += p->mn[i];
+            p->cc[i] = sum;
+        }
     } else {
         for (int k = 0; k <= N; k++) p->cc[k] = cfg->m;
-        p->cc[0] = p->cc[N] = 0.5 * cfg->m;
-        p->md[0] = cfg->J + p->cc[1] * cfg->l * cfg->l;
+        p->cc[0] = 0.5 * cfg->hub_mass;
+        p->cc[1] = 0.5 * (cfg->hub_mass + cfg->m);
+        p->cc[N] = 0.5 * cfg->m;
+        p->md[0] = cfg->J + p->cc[1] * cfg->hub_length * cfg->hub_length;
         for (int k = 2; k <= N; k++) p->md[node_index(k)] = p->md[node_index(k) + 1] = p->cc[k];
     }
     for (int i = 0; i < n; i++) p->v[i] = 0.0;
     if (cfg->kind == ROD_PLANT_DER) {
         for (int k = 2; k <= N; k++) {
             p->q[node_index(k)] = 0.0;
-            p->q[node_index(k) + 1] = -k * cfg->l;
+            p->q[node_index(k) + 1] = -(cfg->hub_length + (k - 1) * cfg->l);
         }
         p->q[0] = 0.0;
     }
@@ -878,6 +917,8 @@ rod_plant *rod_plant_new(const rod_plant_config *cfg)
 }
 
 void rod_plant_free(rod_plant *p) { free(p); }
+
+void rod_plant_set_external_torque(rod_plant *p, double torque) { p->ext = torque; }
 
 int rod_plant_kind(const rod_plant *p) { return p->cfg.kind; }
 int rod_plant_edges(const rod_plant *p) { return p->N; }
@@ -940,10 +981,9 @@ int rod_plant_set_state(rod_plant *p, const double *theta, const double *dtheta)
         memcpy(p->v, dtheta, sizeof(double) * (size_t)N);
         return ROD_OK;
     }
-    const double l = p->cfg.l;
     double x = 0, y = 0, vx = 0, vy = 0;
     for (int k = 1; k <= N; k++) {
-        const double s = sin(theta[k - 1]), c = cos(theta[k - 1]);
+        const double s = sin(theta[k - 1]), c = cos(theta[k - 1]), l = p->lv[k - 1];
         x += l * s;
         y -= l * c;
         vx += l * dtheta[k - 1] * c;
@@ -968,7 +1008,7 @@ static void state_angles(const rod_plant *p, const double *q, const double *qd, 
         if (dtheta) memcpy(dtheta, qd, sizeof(double) * (size_t)N);
         return;
     }
-    const double l = p->cfg.l, sp = sin(q[0]), cp = cos(q[0]);
+    const double l = p->cfg.hub_length, sp = sin(q[0]), cp = cos(q[0]);
     double px = l * sp, py = -l * cp;              /* node k-1 */
     double pvx = l * qd[0] * cp, pvy = l * qd[0] * sp; /* its velocity */
     double prev = q[0];
@@ -1005,8 +1045,8 @@ void rod_plant_nodes(const rod_plant *p, double *xy)
     double x = 0, y = 0;
     xy[0] = xy[1] = 0.0;
     for (int k = 1; k <= N; k++) {
-        x += p->cfg.l * sin(p->q[k - 1]);
-        y -= p->cfg.l * cos(p->q[k - 1]);
+        x += p->lv[k - 1] * sin(p->q[k - 1]);
+        y -= p->lv[k - 1] * cos(p->q[k - 1]);
         xy[2 * k] = x;
         xy[2 * k + 1] = y;
     }
@@ -1031,7 +1071,7 @@ int rod_plant_force(rod_plant *p, const double *y, double input, double *F)
     der_prepare(p, q, p->Fc, p->Cb);
     band_mul(p->Cb, qd, p->tmp, n);
     for (int i = 0; i < n; i++) F[i] = p->Fc[i] - p->tmp[i];
-    F[0] += T;
+    F[0] += T + p->ext - coulomb(p, qd[0], NULL);
     return ROD_OK;
 }
 
@@ -1073,7 +1113,7 @@ double rod_plant_energy(const rod_plant *cp)
 {
     rod_plant *p = (rod_plant *)cp; /* uses scratch only */
     const int N = p->N;
-    const double ks = p->ks;
+    const double *ksj = p->ksj;
     if (p->cfg.kind == ROD_PLANT_INEXTENSIBLE) {
         double *s = p->s2, *c = p->c2, *Mw = p->F2;
         trig(p->q, s, c, N);
@@ -1081,14 +1121,14 @@ double rod_plant_energy(const rod_plant *cp)
         double kin = 0, bend = 0, grav = 0;
         for (int i = 0; i < N; i++) {
             kin += p->v[i] * Mw[i];
-            grav -= p->cc[i] * c[i];
+            grav -= p->lv[i] * p->cc[i] * c[i];
         }
         for (int j = 0; j < N - 1; j++) {
             const double cp2 = c[j + 1] * c[j] + s[j + 1] * s[j], sp = s[j + 1] * c[j] - c[j + 1] * s[j];
             const double t = sp / (1.0 + cp2);
-            bend += 4.0 * t * t;
+            bend += ksj[j] * 4.0 * t * t;
         }
-        return 0.5 * kin + 0.5 * ks * bend + p->cfg.g * p->cfg.m * p->cfg.l * grav;
+        return 0.5 * kin + 0.5 * bend + p->cfg.g * grav;
     }
     const int n = p->n;
     double *X = p->X, *E = p->E;
@@ -1104,10 +1144,10 @@ double rod_plant_energy(const rod_plant *cp)
         const double ax = E[2 * j], ay = E[2 * j + 1], bx = E[2 * j + 2], by = E[2 * j + 3];
         const double kap = 2.0 * (ax * by - ay * bx) /
                            (sqrt(ax * ax + ay * ay) * sqrt(bx * bx + by * by) + ax * bx + ay * by);
-        bend += kap * kap;
+        bend += ksj[j] * kap * kap;
     }
     for (int k = 0; k <= N; k++) grav += p->cc[k] * X[2 * k + 1];
-    return 0.5 * kin + 0.5 * p->cfg.EA * p->cfg.l * st + 0.5 * ks * bend + p->cfg.g * grav;
+    return 0.5 * kin + 0.5 * p->cfg.EA * p->cfg.l * st + 0.5 * bend + p->cfg.g * grav;
 }
 
 /* ------------------------------------------------------------------------------------------ */

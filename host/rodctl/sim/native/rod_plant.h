@@ -42,7 +42,7 @@
 extern "C" {
 #endif
 
-#define ROD_PLANT_API_VERSION 1
+#define ROD_PLANT_API_VERSION 2
 
 enum { ROD_PLANT_INEXTENSIBLE = 0, ROD_PLANT_DER = 1 };
 enum { ROD_INPUT_TORQUE = 0, ROD_INPUT_DUTY = 1 };
@@ -80,6 +80,15 @@ typedef struct {
     double encoder_phase;    /* in [0, 1) */
     double max_step;         /* integrator step bound [s] (> 0); advance(dt) takes ceil(dt / max_step - 1 ppm)
                                 equal steps */
+    /* Edge 1 is the length clamped in the shaft hub: it turns with the shaft and never bends. The
+     * paper's model has hub_length = l, hub_mass = m, hub_stiffness = EI / l, hub_damping = d; the
+     * faithful plant has a physical hub length independent of N (l = (L - hub) / (N - 1)). */
+    double hub_length;       /* length of edge 1 [m] (>= 0; > 0 for the DER; 0 needs J > 0) */
+    double hub_mass;         /* mass of edge 1 [kg] */
+    double hub_stiffness;    /* bending stiffness of the joint between edge 1 and edge 2 [N m/rad] */
+    double hub_damping;      /* damping of that joint [N m s/rad] */
+    double coulomb;          /* Coulomb (dry) friction at the output shaft [N m]: -coulomb tanh(omega / coulomb_rate) */
+    double coulomb_rate;     /* smoothing rate of the Coulomb friction [rad/s] (> 0) */
 } rod_plant_config;
 
 typedef struct rod_plant rod_plant;
@@ -138,6 +147,9 @@ int rod_plant_advance(rod_plant *p, double input, double dt);
  * (average over the integrator steps of the torque each step applied). */
 double rod_plant_last_torque(const rod_plant *p);
 double rod_plant_last_current(const rod_plant *p);
+
+/* An external torque on the shaft [N m] (a disturbance), held until changed; 0 at creation. */
+void rod_plant_set_external_torque(rod_plant *p, double torque);
 
 int32_t rod_plant_encoder(const rod_plant *p);
 /* The count for a given angle (same formula, for tests). */

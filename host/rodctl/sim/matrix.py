@@ -1,0 +1,406 @@
+"""The robustness matrix: the firmware judged on the faithful plant, case by case (issue 8).
+
+    from rodgains.params import load_params
+    from rodctl.sim.matrix import CASES, run_case
+    r = run_case(load_params(), CASES["E+15"], "swingup")   # {"passed": True, "caught_at_s": 2.9, ...}
+
+Every case runs the SIL firmware designed from `params` (+ the case's design_overrides, normally
+none) against the FAITHFUL plant: the parameter file's [plant] table (model, edges, hub_length),
+the physical motor (rotor inertia, viscous and Coulomb friction), the MAX14870 in duty mode and
+the 979.2 counts/turn encoder, with the case's plant_overrides applied to the plant only. The
+design never sees a plant override: that is the point of the matrix. `plant_params` (run_case,
+run_matrix) puts another rod in the plant's place: a hidden rig judged against an identified design.
+
+Tasks: "balance" (a straight rod released at rest BALANCE_START_DEG from upright, armed in
+BALANCE) and "swingup" (from rest hanging, armed in SWING_UP). Pass rules: `criterion(task)`;
+the nominal case is held to the stricter goals of issue 8 (`criterion(task, strict=True)`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from rodgains.errors import InputError, UserError
+from rodgains.params import Params
+
+TASKS = ("balance", "swingup")
+
+BALANCE_START_DEG = 30.0
+SETTLE_DEG = 1.0  # the nominal goal band [deg]
+ROBUST_BAND_DEG = 3.0  # every case: every link within this at the end [deg]
+FINAL_WINDOW_S = 0.5  # "at the end": the largest deviation over the last this many seconds [s]
+DEFAULT_SECONDS = {"balance": 6.0, "swingup": 14.0}
+# nominal goals
+BALANCE_SETTLE_GOAL_S = 1.5
+SWINGUP_CATCH_GOAL_S = 5.0
+SWINGUP_SETTLE_GOAL_S = 2.0  # every link within SETTLE_DEG this long after the catch
+SWINGUP_TURNS_GOAL = 1.0
+# every case
+SWINGUP_CATCH_LIMIT_S = 10.0
+
+MODE_BALANCE, MODE_SWING_UP, MODE_FAULT = 1, 2, 3
+
+
+@dataclass(frozen=True)
+class Case:
+    """One row of the matrix.
+
+    plant_overrides / design_overrides: "section.key=value" or "section.key*=factor".
+    delay_periods: extra control periods between the command and the plant (0 or 1).
+    disturbance: (torque [N m], start [s] after balancing begins, duration [s]) on the shaft; balance task only.
+    strict: hold the case to the nominal goals (settle times, catch time, base turns).
+    """
+
+    name: str
+    title: str
+    plant_overrides: tuple[str, ...] = ()
+    design_overrides: tuple[str, ...] = ()
+    delay_periods: int = 0
+    disturbance: tuple[float, float, float] | None = None
+    strict: bool = False
+    tasks: tuple[str, ...] = TASKS
+
+
+def _cases() -> dict[str, Case]:
+    c = [Case("nominal", "the faithful plant as the parameter file describes it", strict=True)]
+    for sign, f in (("+", 1.15), ("-", 0.85)):
+        c.append(Case(f"E{sign}15", f"Young's modulus {sign}15 %", (f"rod.youngs_modulus*={f}",)))
+    for sign, f in (("+", 1.15), ("-", 0.85)):
+        c.append(Case(f"rho{sign}15", f"density {sign}15 %", (f"rod.density*={f}",)))
+    c.append(Case("damping*0.1", "rod damping x0.1", ("rod.damping*=0.1",)))
+    c.append(Case("damping*10", "rod damping x10", ("rod.damping*=10",)))
+    c.append(Case("viscous*3", "gearbox viscous friction x3", ("motor.viscous_friction*=3",)))
+    c.append(Case("coulomb*0", "no Coulomb friction", ("motor.coulomb_friction*=0",)))
+    c.append(Case("coulomb*2", "Coulomb friction x2", ("motor.coulomb_friction*=2",)))
+    for sign, f in (("+", 1.3), ("-", 0.7)):
+        c.append(Case(f"J{sign}30", f"rotor inertia {sign}30 %", (f"motor.rotor_inertia*={f}",)))
+    for sign, f in (("+", 1.15), ("-", 0.85)):
+        # k_t and k_e are one constant of the motor (SI units): both move together
+        c.append(Case(f"kt{sign}15", f"torque (and back-EMF) constant {sign}15 %",
+                      (f"motor.torque_constant*={f}", f"motor.back_emf_constant*={f}")))
+    for sign, f in (("+", 1.03), ("-", 0.97)):
+        c.append(Case(f"L{sign}3", f"rod length {sign}3 %", (f"rod.length*={f}",)))
+    for v in (11, 13):
+        c.append(Case(f"supply{v}", f"motor supply {v} V", (f"driver.supply_voltage={v}.0",)))
+    c.append(Case("delay+1", "one extra control period of delay", delay_periods=1))
+    for sign, T in (("+", 0.05), ("-", -0.05)):
+        c.append(Case(f"dist{sign}", f"{T:+.2f} N m for 50 ms on the shaft while balanced", disturbance=(T, 3.0, 0.05),
+                      tasks=("balance",)))
+    for model, tag in (("inextensible", "inext"), ("der", "der")):
+        for n in (10, 20, 40):
+            c.append(Case(f"{tag}{n}", f"{model} plant, {n} edges beyond the hub",
+                          (f'plant.model="{model}"', f"plant.edges={n}")))
+    return {x.name: x for x in c}
+
+
+CASES: dict[str, Case] = _cases()
+# (case, task) the default design does not pass, and why (README "Where the paper's design fails");
+# tests/test_robustness_matrix.py expects exactly these to fail.
+KNOWN_FAILURES: dict[tuple[str, str], str] = {
+    ("damping*10", "balance"): "a rod 10x more damped than the design's observer model: a 3.4 Hz bending oscillation "
+                               "grows (linearly unstable: spectral radius 1.0048) and the angle limit trips; the "
+                               "observer tunings we found that stabilize it settle nominal balance in 3.3 s or "
+                               "more (goal 1.5 s)",
+    ("damping*10", "swingup"): "caught at 0.96 s, then the same instability as balance",
+}
+CASE_SETS: dict[str, tuple[str, ...]] = {
+    "matrix": tuple(CASES),
+    "nominal": ("nominal",),
+    "quick": ("nominal", "E-15", "delay+1", "inext10"),
+    "plants": tuple(n for n in CASES if n.startswith(("inext", "der"))),
+}
+
+
+def cases_for(task: str, names=None) -> list[Case]:
+    """The cases of a set (default: the whole matrix) that apply to `task`."""
+    names = CASE_SETS["matrix"] if names is None else names
+    return [CASES[n] for n in names if task in CASES[n].tasks]
+
+
+def criterion(task: str, strict: bool = False) -> str:
+    """The pass rule in words."""
+    if task == "balance":
+        rule = f"no FAULT; every link within {ROBUST_BAND_DEG:g} deg of upright over the last {FINAL_WINDOW_S:g} s"
+        if strict:
+            rule = (f"no FAULT; every link within {SETTLE_DEG:g} deg of upright by {BALANCE_SETTLE_GOAL_S:g} s after "
+                    f"arming, and to the end")
+        return rule
+    if task == "swingup":
+        rule = (f"caught within {SWINGUP_CATCH_LIMIT_S:g} s, no FAULT, every link within {ROBUST_BAND_DEG:g} deg "
+                f"over the last {FINAL_WINDOW_S:g} s")
+        if strict:
+            rule = (f"caught within {SWINGUP_CATCH_GOAL_S:g} s, every link within {SETTLE_DEG:g} deg by "
+                    f"{SWINGUP_SETTLE_GOAL_S:g} s after the catch and to the end, never more than "
+                    f"{SWINGUP_TURNS_GOAL:g} base turn from the start, no FAULT")
+        return rule
+    raise InputError(f"unknown task {task!r}; one of {', '.join(TASKS)}")
+
+
+def scaled_overrides(p: Params, items) -> list[str]:
+    """"section.key*=f" -> "section.key=<value of p times f>"; other items pass through."""
+    out = []
+    for it in items:
+        if "*=" in it:
+            name, f = it.split("*=", 1)
+            sec, key = name.strip().split(".")
+            v = p[sec][key] * float(f)
+            out.append(f"{name.strip()}={v!r}" if isinstance(v, float) else f"{name.strip()}={v}")
+        else:
+            out.append(it)
+    return out
+
+
+def apply_overrides(p: Params, items) -> Params:
+    items = scaled_overrides(p, items)
+    return p.with_overrides(*items) if items else p
+
+
+def _deviation_deg(theta: np.ndarray) -> np.ndarray:
+    return np.degrees(np.abs(np.mod(theta, 2 * np.pi) - np.pi))
+
+
+def simulate(design_p: Params, plant_p: Params, task: str, *, seconds: float, delay_periods: int = 0,
+             disturbance=None, progress: Callable[[str, float], None] | None = None, label: str = "",
+             start_deg: float = BALANCE_START_DEG) -> dict:
+    """One closed-loop run of the SIL firmware for `design_p` against the faithful plant of `plant_p`.
+    Returns the raw log (time, theta, torque, mode, est, ...) plus plant_bounds (node arc positions [m]),
+    reason and plant description."""
+    from rodctl.build.sil_build import build_sil
+    from rodctl.sim.plant import SilController, faithful_plant, run_closed_loop
+
+    if progress:
+        progress(f"{label}: compiling the firmware", 0.0)
+    ctl = SilController(build_sil(design_p))
+    pl = faithful_plant(plant_p, input_mode="duty")
+    nq = pl.N
+    if task == "balance":
+        pl.set_state(np.full(nq, math.pi - math.radians(start_deg)), np.zeros(nq))
+        arm = 1
+    elif task == "swingup":
+        pl.set_state(np.zeros(nq), np.zeros(nq))
+        arm = 2
+    else:
+        raise InputError(f"unknown task {task!r}; one of {', '.join(TASKS)}")
+    dt = ctl.period
+    periods = int(round(seconds / dt))
+    # chunk boundaries: progress every 0.5 s, and the disturbance window's edges
+    cuts = set(range(0, periods, max(1, int(round(0.5 / dt))))) | {periods}
+    if disturbance is not None:
+        if task != "balance":
+            raise InputError("a disturbance case runs on the balance task only")
+        T, t0, dur = disturbance
+        k0, k1 = int(round(t0 / dt)), int(round((t0 + dur) / dt))
+        cuts |= {min(k0, periods), min(k1, periods)}
+    cuts = sorted(cuts)
+    parts = []
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        if disturbance is not None:
+            pl.external_torque = disturbance[0] if k0 <= a < k1 else 0.0
+        parts.append(run_closed_loop(pl, ctl, b - a, arm_mode=arm, delay_periods=delay_periods, reset=(a == 0)))
+        if progress:
+            progress(label, b / periods)
+    pl.external_torque = 0.0
+    log = {k: np.concatenate([q[k] for q in parts]) for k in parts[0] if isinstance(parts[0][k], np.ndarray)}
+    log["reason"] = int(ctl.lib.rod_sil_reason()) if hasattr(ctl.lib, "rod_sil_reason") else 0
+    log["plant_bounds"] = pl.node_arc()
+    log["plant"] = repr(pl)
+    log["plant_label"] = pl.label()
+    log["controller_edges"] = ctl.edges
+    return log
+
+
+def summarize(log: dict, task: str, strict: bool = False) -> dict[str, Any]:
+    """The numbers of one run and its verdict (JSON-serializable; inf/nan as None)."""
+    t, theta, mode = log["time"], log["theta"], log["mode"]
+    dev = _deviation_deg(theta).max(axis=1)
+    fault = bool((mode == MODE_FAULT).any())
+    caught = np.where(mode == MODE_BALANCE)[0]
+    caught_at = float(t[caught[0]]) if (task == "swingup" and len(caught)) else None
+    start = (caught_at if caught_at is not None else math.inf) if task == "swingup" else 0.0
+    after = t >= start
+    dt = float(t[1] - t[0]) if len(t) > 1 else 1e-3
+    nfin = max(1, int(round(FINAL_WINDOW_S / dt)))
+    final = float(dev[-nfin:].max())
+    outside = np.where(after & (dev > SETTLE_DEG))[0]
+    if fault or final > SETTLE_DEG or not after.any():
+        settle = math.inf
+    else:
+        settle = max(0.0, float(t[outside[-1] + 1] - start)) if len(outside) else 0.0
+    turns = float(np.max(np.abs(theta[:, 0] - theta[0, 0])) / (2 * math.pi))
+    r: dict[str, Any] = {
+        "task": task,
+        "settle_s": settle,
+        "final_dev_deg": final,
+        "max_dev_deg": float(dev[after].max()) if after.any() else float(dev.max()),
+        "peak_torque_Nm": float(np.max(np.abs(log["torque"][after]))) if after.any() else 0.0,
+        "caught_at_s": caught_at,
+        "fault": fault,
+        "fault_reason": int(log["reason"]) if fault else 0,
+        "base_turns_max": turns,
+        "est_rms_deg": math.nan,
+        "simulated_s": float(t[-1] + dt) if len(t) else 0.0,
+    }
+    n = log["controller_edges"]
+    use = (mode == MODE_BALANCE) & (t >= (start if math.isfinite(start) else math.inf) + 0.5)
+    if use.any():
+        from rodctl.sim.scenarios import resample_edges  # scenarios imports this module at load
+
+        err = log["est"][use, :n].astype(float) - resample_edges(theta[use], n, log["plant_bounds"])
+        err = np.mod(err + np.pi, 2 * np.pi) - np.pi
+        r["est_rms_deg"] = float(np.degrees(np.sqrt(np.mean(err**2))))
+    if task == "balance":
+        ok = not fault and final <= ROBUST_BAND_DEG
+        if strict:
+            ok = not fault and settle <= BALANCE_SETTLE_GOAL_S
+    else:
+        ok = caught_at is not None and caught_at <= SWINGUP_CATCH_LIMIT_S and not fault and final <= ROBUST_BAND_DEG
+        if strict:
+            ok = (caught_at is not None and caught_at <= SWINGUP_CATCH_GOAL_S and not fault
+                  and settle <= SWINGUP_SETTLE_GOAL_S and turns <= SWINGUP_TURNS_GOAL)
+    r["passed"] = bool(ok)
+    return r
+
+
+def _json_safe(d: dict) -> dict:
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
+
+
+def run_case(params: Params, case: Case, task: str, *, extra_plant_overrides=(), seconds: float | None = None,
+             progress: Callable[[str, float], None] | None = None, keep_log: bool = False,
+             start_deg: float = BALANCE_START_DEG, plant_params: Params | None = None) -> dict[str, Any]:
+    """Run one case of the matrix: the firmware designed from params (+ design_overrides) against the
+    faithful plant (params' [plant] table + plant_overrides + extra_plant_overrides).
+
+    plant_params: the true rod when it is not the one the design believes in (a hidden rig, `rodctl
+    robustness --plant`): its physics and [plant] table make the plant, and the case's relative
+    overrides ("*=") scale its values, not the design's.
+
+    Returns a JSON-serializable dict: passed, case, task, criterion, settle_s, final_dev_deg, max_dev_deg,
+    peak_torque_Nm, caught_at_s (swing-up), fault_reason (0 none), base_turns_max, est_rms_deg, plant.
+    Non-finite numbers are None. keep_log=True adds the raw log under "log" (not JSON-serializable).
+    start_deg: where the balance task releases the rod, from upright [deg].
+    """
+    if task not in TASKS:
+        raise InputError(f"unknown task {task!r}; one of {', '.join(TASKS)}")
+    if task not in case.tasks:
+        raise InputError(f"case {case.name} does not apply to the {task} task")
+    design_p = apply_overrides(params, case.design_overrides)
+    plant_p = apply_overrides(params if plant_params is None else plant_params,
+                              tuple(case.plant_overrides) + tuple(extra_plant_overrides))
+    T = seconds or DEFAULT_SECONDS[task]
+    log = simulate(design_p, plant_p, task, seconds=T, delay_periods=case.delay_periods,
+                   disturbance=case.disturbance, progress=progress, label=f"{case.name}/{task}", start_deg=start_deg)
+    r = summarize(log, task, strict=case.strict)
+    r = _json_safe(r)
+    r.update(case=case.name, title=case.title, criterion=criterion(task, case.strict), plant=log["plant_label"])
+    if keep_log:
+        r["log"] = log
+    return r
+
+
+def run_matrix(params: Params, tasks=TASKS, names=None, *, progress=None, seconds=None,
+               plant_params: Params | None = None) -> list[dict[str, Any]]:
+    """Every case of a set (default: the whole matrix) for every task; one dict per run.
+    plant_params: the true rod, if not params' own (run_case)."""
+    out = []
+    for task in tasks:
+        for case in cases_for(task, names):
+            out.append(run_case(params, case, task, progress=progress, seconds=seconds, plant_params=plant_params))
+    return out
+
+
+LONGEST_START_DEG = 10.0
+# The design is per rod: for the longest-rod measure each length gets the first of these design
+# variants (overrides of the parameter file) that holds it. Measured (README "Where the paper's design
+# fails"): the default's base-torque disturbance state explains the torque that holds a bent rod on a
+# still shaft as a disturbance, so past ~1.05 L_crit the rod buckles unseen; without it the observer
+# keeps the bent shape, and process noise 300 on the rates lets it follow the slow bending faster.
+LONG_ROD_DESIGNS: tuple[tuple[str, ...], ...] = (
+    (),
+    ("observer.process_noise_torque=0.0",),
+    ("observer.process_noise_torque=0.0", "observer.process_noise_rate=300.0"),
+    ("observer.process_noise_torque=0.0", "observer.process_noise_rate=300.0", "rod.edges=6"),
+)
+
+
+def balances(params: Params, length: float, start_deg: float = LONGEST_START_DEG,
+             designs: tuple[tuple[str, ...], ...] = ((),)) -> tuple[str, ...] | None:
+    """Does a design for a rod of this length [m] (same hub, same plant table) hold it from start_deg,
+    every link within SETTLE_DEG at the end, no FAULT? Tries each of `designs` (design-only overrides,
+    applied to the design and never to the plant) in order; returns the first that holds (() for the
+    parameter file's own design, so test `is not None`), else None."""
+    from rodgains.errors import DesignRefused
+
+    p = params.with_overrides(f"rod.length={length!r}")
+    for ovs in designs:
+        try:
+            r = run_case(p, Case("longest", "longest rod", design_overrides=tuple(ovs)), "balance", start_deg=start_deg)
+        except DesignRefused:
+            continue
+        if r["fault_reason"] == 0 and r["final_dev_deg"] <= SETTLE_DEG:
+            return tuple(ovs)
+    return None
+
+
+def longest_balanced(params: Params, lo: float = 1.0, hi: float = 1.6, step: float = 0.01, progress=None,
+                     designs: tuple[tuple[str, ...], ...] = ((),)) -> dict:
+    """The longest rod (as a ratio to the continuum critical length, Greenhill) a design holds from
+    LONGEST_START_DEG on the faithful plant, with no gap below it: lengths lo, lo + step, ... up to hi,
+    stopping at the first that no design holds. (Not a bisection: near the limit pass/fail is not
+    monotone in length; with LONG_ROD_DESIGNS 1.10 holds, 1.11 to 1.15 fail, 1.16 holds.)
+    designs: the design variants tried at each length (LONG_ROD_DESIGNS: the design redone for the
+    long rod; default: the parameter file's design only). Returns ratio, length_m, critical_length_m,
+    design (the overrides that held the longest rod), first_failure (ratio), note."""
+    from rodgains.buckling import greenhill_length
+
+    lc = greenhill_length(params)
+    best, held, first_fail = None, None, None
+    k = 0
+    while lo + k * step <= hi + 1e-9:
+        ratio = round(lo + k * step, 6)
+        if progress:
+            progress(f"L = {ratio:.3f} L_crit", (ratio - lo) / max(hi - lo, 1e-9))
+        got = balances(params, ratio * lc, designs=designs)
+        if got is None:
+            first_fail = ratio
+            break
+        best, held = ratio, got
+        k += 1
+    if best is None:
+        return {"ratio": None, "length_m": None, "critical_length_m": lc, "design": None, "first_failure": lo,
+                "note": f"fails at {lo:g} x L_crit"}
+    return {"ratio": best, "length_m": best * lc, "critical_length_m": lc, "design": list(held),
+            "first_failure": first_fail, "note": "" if first_fail is not None else f"holds up to {hi:g} (searched)"}
+
+
+def table_markdown(rows: list[dict[str, Any]]) -> str:
+    """The matrix as a markdown table, one row per case, both tasks side by side."""
+    from rodctl.sim.figures import fmt
+
+    by = {}
+    for r in rows:
+        by.setdefault(r["case"], {})[r["task"]] = r
+    out = ["| case | balance: final [deg] | settle 1 deg [s] | result | swing-up: caught [s] | final [deg] | "
+           "base turns | result |", "|---|---|---|---|---|---|---|---|"]
+    nan = math.nan
+    for name, d in by.items():
+        b, s = d.get("balance"), d.get("swingup")
+
+        def v(r, k, nd=2):
+            if r is None:
+                return "-"
+            x = r.get(k)
+            return fmt(nan if x is None else x, nd) if x is not None or k != "caught_at_s" else "never"
+
+        def res(r):
+            if r is None:
+                return "-"
+            return "pass" if r["passed"] else "**fail**" + (f" (FAULT {r['fault_reason']})" if r["fault_reason"] else "")
+
+        out.append(f"| {name} | {v(b, 'final_dev_deg')} | {v(b, 'settle_s')} | {res(b)} | {v(s, 'caught_at_s')} | "
+                   f"{v(s, 'final_dev_deg')} | {v(s, 'base_turns_max')} | {res(s)} |")
+    return "\n".join(out) + "\n"
