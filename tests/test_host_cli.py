@@ -13,7 +13,7 @@ from rodgains.params import load_params
 from rodctl.cli import flash as cmd_flash
 from rodctl.link import ports
 from rodctl.link import protocol as P
-from rodctl.cli.plot import PANELS, make_figure, shape_nodes
+from rodctl.logs.plots import PANELS, make_figure, shape_nodes
 from rodctl.logs import LogWriter, read_log, simulator_metadata
 
 

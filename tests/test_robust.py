@@ -244,6 +244,35 @@ def test_unreachable_scheduler_is_one_line_exit_2(tmp_path, monkeypatch, capsys)
     assert not (tmp_path / "robustness.json").exists()
 
 
+def test_draws_and_units_perturb_the_plant_given_not_the_design():
+    p = load_params()
+    hidden = p.with_overrides("rod.youngs_modulus=7.0e5")
+
+    def E(d):
+        return float(dict(o.split("=") for o in d.overrides)["rod.youngs_modulus"])
+
+    for own, other in zip(draws(p, 5, seed=3), draws(p, 5, seed=3, plant=hidden)):
+        assert E(other) / E(own) == pytest.approx(7.0e5 / p["rod"]["youngs_modulus"])
+    units = S.units(p, "quick", samples=1, plant=hidden)
+    assert {u.plant_json for u in units} == {hidden.canonical_json()}
+    assert {u.params_json for u in units} == {p.canonical_json()}
+
+
+@pytest.mark.parametrize("text, words", [
+    (None, "cannot read parameter file"),
+    ("x = [", "not valid TOML"),
+])
+def test_a_bad_plant_file_is_one_line_exit_2(text, words, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    bad = tmp_path / "hidden.toml"
+    if text is not None:
+        bad.write_text(text)
+    assert main(["robustness", "--cases", "nominal", "--samples", "0", "--plant", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"rodctl: --plant: {bad}: {words}") and "\n" not in err
+    assert not (tmp_path / "robustness.json").exists()
+
+
 # ---- the commands end to end (short runs) -------------------------------------------------------------
 
 def test_robustness_writes_json_and_heatmap(tmp_path, capsys):
@@ -290,6 +319,23 @@ def test_tune_tiny_budget_writes_a_complete_file_and_resumes(tmp_path, capsys):
     assert [t["number"] for t in trials] == [0, 1, 2] and all("score" in t for t in trials)
     # the study pins its inputs
     assert main(argv[:4] + ["2"] + argv[5:] + ["--budget", "3", "--force"]) == 2
+
+
+def test_the_first_trial_is_the_parameter_file_itself_in_every_searched_dimension():
+    from rodctl.robust.tune import space, starting_point
+
+    p = load_params()
+    dims = space()
+    start = starting_point(p, dims)
+    # a default outside a searched range would make trial 0 a random design, not the file
+    assert {d.name for d in dims} == set(start)
+    for d in dims:
+        sec, key = d.name.split(".")
+        assert start[d.name] == p[sec][key]
+    assert {"observer.process_noise_torque", "swing_up.energy_target", "swing_up.rate_filter_hz"} <= set(start)
+    amp = next(d for d in dims if d.name == "swing_up.amplitude")
+    tight = p.with_overrides("driver.current_limit=0.5", "swing_up.amplitude=0.02")
+    assert amp.bounds(tight)[1] == pytest.approx(tight.torque_max)  # the driver's ceiling, not only safety's
 
 
 def _finished_trials(study: Path) -> int:
@@ -341,3 +387,25 @@ def test_bad_outputs_and_counts_fail_before_any_run(argv, words, tmp_path, capsy
     err = capsys.readouterr().err.strip()
     assert err.startswith("rodctl: ") and "\n" not in err and words in err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_plant_option_judges_the_design_on_another_rod(tmp_path, capsys):
+    """--plant FILE: the design stays the default's, the rod (physics and [plant] table) is FILE's."""
+    far = tmp_path / "far.toml"  # a rotor 3x heavier on a 10-edge N-link rod: the default design drops it
+    far.write_text(load_params().with_overrides("motor.rotor_inertia=1.5e-6", 'plant.model="inextensible"',
+                                                "plant.edges=10").to_toml())
+    runs, docs = {}, {}
+    for tag, extra in (("own", []), ("far", ["--plant", str(far)])):
+        js = tmp_path / f"{tag}.json"
+        assert main(["robustness", "--cases", "nominal", "--samples", "0", "--seconds", "3", "--jobs", "1",
+                     "--json", str(js), "--plot", "", *extra]) == 0
+        docs[tag] = json.loads(js.read_text())
+        runs[tag] = {r["task"]: r for r in docs[tag]["runs"]}
+    for task in ("balance", "swingup"):
+        own, other = runs["own"][task], runs["far"][task]
+        assert own["fault_reason"] == 0 and own["final_dev_deg"] < 3, own
+        assert not other["passed"] and other["fault_reason"] != 0, other
+        assert own["plant"].startswith("der, 30 edges") and other["plant"].startswith("inextensible, 10 edges")
+    assert docs["far"]["plant_source"] == str(far) and docs["own"]["plant_source"] is None
+    assert docs["far"]["parameters"]["motor"]["rotor_inertia"] == load_params()["motor"]["rotor_inertia"]
+    assert docs["far"]["plant_parameters"]["motor"]["rotor_inertia"] == 1.5e-6

@@ -48,8 +48,8 @@ def test_every_case_of_the_issue_is_in_the_matrix():
     assert {c.name for c in matrix.cases_for("swingup")} == set(matrix.CASES) - {"dist+", "dist-"}
 
 
-def test_a_plant_override_never_reaches_the_design(monkeypatch):
-    """The design is built from params + design_overrides only; the plant gets the case's overrides."""
+def _stop_at_simulate(monkeypatch) -> dict:
+    """Make matrix.simulate record the design and plant parameters it is given, then raise."""
     seen = {}
 
     def fake(design_p, plant_p, task, **kw):
@@ -57,11 +57,30 @@ def test_a_plant_override_never_reaches_the_design(monkeypatch):
         raise RuntimeError("stop")
 
     monkeypatch.setattr(matrix, "simulate", fake)
+    return seen
+
+
+def test_a_plant_override_never_reaches_the_design(monkeypatch):
+    """The design is built from params + design_overrides only; the plant gets the case's overrides."""
+    seen = _stop_at_simulate(monkeypatch)
     p = load_params()
     with pytest.raises(RuntimeError):
         matrix.run_case(p, matrix.CASES["E+15"], "balance")
     assert seen["design"]["rod"]["youngs_modulus"] == p["rod"]["youngs_modulus"]
     assert seen["plant"]["rod"]["youngs_modulus"] == pytest.approx(1.15 * p["rod"]["youngs_modulus"])
+
+
+def test_plant_params_replace_the_plant_and_the_case_scales_them(monkeypatch):
+    """run_case(plant_params=hidden): the design stays params', the plant is the hidden rod (its [plant]
+    table too) and a relative case override scales the hidden value (rodctl robustness --plant)."""
+    seen = _stop_at_simulate(monkeypatch)
+    p = load_params()
+    hidden = p.with_overrides("motor.rotor_inertia=6.0e-7", 'plant.model="inextensible"', "plant.edges=12")
+    with pytest.raises(RuntimeError):
+        matrix.run_case(p, matrix.CASES["J+30"], "balance", plant_params=hidden)
+    assert seen["design"] is p
+    assert seen["plant"]["motor"]["rotor_inertia"] == pytest.approx(1.3 * 6.0e-7)
+    assert (seen["plant"]["plant"]["model"], seen["plant"]["plant"]["edges"]) == ("inextensible", 12)
 
 
 def test_result_is_json_serializable(results):

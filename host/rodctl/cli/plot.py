@@ -11,7 +11,7 @@ from pathlib import Path
 
 from rodgains.errors import UserError
 
-from rodctl.logs.plots import PANELS, PLOT_COLUMNS, make_figure, save_figure, shape_nodes  # noqa: F401 - the API
+from rodctl.logs.plots import PANELS, PLOT_COLUMNS, make_figure, save_figure
 
 NON_INTERACTIVE = {"agg", "pdf", "ps", "svg", "pgf", "cairo", "template", "module://matplotlib_inline.backend_inline"}
 

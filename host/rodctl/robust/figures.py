@@ -42,7 +42,9 @@ def heatmap(rows: list[dict], path: Path, title: str) -> Path:
 
     tasks = list(dict.fromkeys(r["task"] for r in rows))
     height = max(len([r for r in rows if r["task"] == t]) for t in tasks)
-    fig, axes = plt.subplots(1, len(tasks), figsize=(7.2 * len(tasks), 1.2 + 0.22 * height), squeeze=False)
+    # constrained layout: tight_layout cannot fit the rotated labels of a short matrix and warns
+    fig, axes = plt.subplots(1, len(tasks), figsize=(7.2 * len(tasks), 1.6 + 0.22 * height), squeeze=False,
+                             layout="constrained")
     cmap = matplotlib.colormaps["viridis_r"]
     for ax, task in zip(axes[0], tasks):
         sub = [r for r in rows if r["task"] == task]
@@ -79,7 +81,6 @@ def heatmap(rows: list[dict], path: Path, title: str) -> Path:
         for s in ax.spines.values():
             s.set_visible(False)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=130)

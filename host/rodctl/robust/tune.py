@@ -38,13 +38,17 @@ class Dim:
     why: str = ""
 
     def bounds(self, params: Params) -> tuple[float, float]:
-        # the swing-up pump may never exceed the torque the safety limit allows
+        lo, hi = self.low, self.high
+        # the swing-up pump may never exceed the torque the driver and the safety limit allow
         if self.name == "swing_up.amplitude":
-            return self.low, min(self.high, params["safety"]["torque_limit"])
+            hi = min(hi, params.torque_max)
         # a catch must happen inside the angle limit, or the catch itself trips it
         if self.name == "swing_up.catch_angle_deg":
-            return self.low, min(self.high, params["safety"]["angle_limit_deg"] - 5.0)
-        return self.low, self.high
+            hi = min(hi, params["safety"]["angle_limit_deg"] - 5.0)
+        # the starting point is always inside, so trial 0 is the parameter file itself
+        sec, key = self.name.split(".")
+        v = params[sec][key]
+        return min(lo, v), max(hi, v)
 
     def text(self, params: Params) -> str:
         if self.choices:
@@ -60,10 +64,14 @@ SPACE: tuple[Dim, ...] = (
     Dim("observer.process_noise_angle", 1e-3, 10.0, log=True, why="[rad^2/s]"),
     Dim("observer.process_noise_rate", 0.1, 1000.0, log=True, why="[rad^2/s^3]"),
     Dim("observer.measurement_noise", 1e-6, 1e-3, log=True, why="[rad^2 s]"),
+    Dim("observer.process_noise_torque", 1e-5, 1.0, log=True, why="disturbance-torque random walk [(N m)^2/s]"),
+    Dim("lqr.friction_compensation", 0.0, 0.02, why="dry-friction feedforward [N m]"),
     # controller model order; the M4F step at N = 20 fits the 1 kHz budget (rodctl bench)
     Dim("rod.edges", choices=(3, 4, 5, 6, 8, 10, 12, 16, 20), why="controller model order [-]"),
     Dim("swing_up.amplitude", 0.02, 0.2, why="pump torque [N m], at most safety.torque_limit"),
-    Dim("swing_up.angle_deg", 10.0, 90.0, why="pump while |theta_1| < this [deg]"),
+    Dim("swing_up.angle_deg", 10.0, 180.0, why="pump while |theta_1| < this [deg]"),
+    Dim("swing_up.energy_target", 0.8, 1.2, why="pump toward this fraction of the upright energy [-]"),
+    Dim("swing_up.rate_filter_hz", 1.0, 20.0, log=True, why="low-pass on the base rate the pump reads [Hz]"),
     Dim("swing_up.catch_angle_deg", 10.0, 45.0, why="switch to balance within this of upright [deg]"),
 )
 

@@ -6,7 +6,8 @@ import math
 
 import numpy as np
 
-from rodctl.cli.plot import shape_nodes
+from rodctl.logs.plots import shape_nodes
+from rodctl.logs.metadata import overrides_of
 from rodctl.sim.scenarios import SETTLE_DEG, Outcome, Trace, resample_edges
 
 COLORS = ["#1f77b4", "#d62728", "#e6a800", "#2ca02c", "#9467bd", "#8c564b"]
@@ -34,7 +35,9 @@ def make_figure(o: Outcome, snapshots: int = 6):
     rows = 3 + (1 if firmware else 0)
     fig = Figure(figsize=(12, 2.4 + 2.2 * (rows - 1)), layout="constrained")
     gs = fig.add_gridspec(rows, snapshots, height_ratios=[1.3] + [1] * (rows - 1))
-    fig.suptitle(f"{o.name}: {o.title}\n{'PASS' if o.passed else 'FAIL'}: {o.criterion}", fontsize=10)
+    over = " ".join(overrides_of(o.params))
+    fig.suptitle(f"{o.name}: {o.title}\n{'PASS' if o.passed else 'FAIL'}: {o.criterion}"
+                 + (f"\noverrides: {over}" if over else ""), fontsize=10)
 
     def lengths(tr):  # edge lengths [m]: a faithful plant's hub differs from its other edges
         return np.diff(tr.node_arc) if tr.node_arc is not None else tr.edge_length

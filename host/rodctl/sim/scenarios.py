@@ -266,15 +266,19 @@ def _settles(m, within=None) -> bool:
     return math.isfinite(m["settle_s"]) and (within is None or m["settle_s"] <= within)
 
 
-def swingup(o: Options) -> Outcome:
-    """The default main job: the testbed swings the Table I rod up from rest and balances it."""
+def _nominal_case(task: str, o: Options, seconds: float) -> Outcome:
+    """The matrix's nominal case (the faithful plant) for `task`, judged by its strict goals."""
     from rodctl.sim import matrix
 
-    r = matrix.run_case(o.params, matrix.CASES["nominal"], "swingup", seconds=o.duration or 12.0,
+    r = matrix.run_case(o.params, matrix.CASES["nominal"], task, seconds=o.duration or seconds,
                         progress=o.progress, keep_log=True)
-    tr = trace_from_log("firmware", r["log"], "swingup")
-    return _outcome("swingup", SCENARIOS["swingup"].title, [tr], r["passed"], matrix.criterion("swingup", True),
-                    o.params)
+    tr = trace_from_log("firmware", r["log"], task)
+    return _outcome(task, SCENARIOS[task].title, [tr], r["passed"], matrix.criterion(task, True), o.params)
+
+
+def swingup(o: Options) -> Outcome:
+    """The default main job: the testbed swings the Table I rod up from rest and balances it."""
+    return _nominal_case("swingup", o, 12.0)
 
 
 def fig3(o: Options) -> Outcome:
@@ -291,13 +295,7 @@ def fig3(o: Options) -> Outcome:
 
 def balance(o: Options) -> Outcome:
     """(d) Balance a straight rod released at 30 deg, output feedback with quantization and limits."""
-    from rodctl.sim import matrix
-
-    r = matrix.run_case(o.params, matrix.CASES["nominal"], "balance", seconds=o.duration or 6.0,
-                        progress=o.progress, keep_log=True)
-    tr = trace_from_log("firmware", r["log"], "balance")
-    return _outcome("balance", SCENARIOS["balance"].title, [tr], r["passed"], matrix.criterion("balance", True),
-                    o.params)
+    return _nominal_case("balance", o, 6.0)
 
 
 def fig2(o: Options) -> Outcome:
