@@ -8,7 +8,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from rodgains.errors import InputError, UserError
+from rodgains.errors import InputError
 from rodgains.params import DEFAULT_PARAMS, Params, load_params
 
 from rodctl import paths
@@ -67,8 +67,11 @@ def generated_files(args) -> tuple[object, dict[Path, str]]:
     return d, files
 
 
-def _writable_dir(path: str | Path, what: str) -> None:
-    """UserError unless path's folder exists and is a folder (checked before any design work)."""
+def check_output(path: str | Path, what: str, *, force: bool | None = None) -> None:
+    """InputError unless `path` can be written: its folder exists and it is not a folder; with `force`
+    given, an existing file also needs force=True. Checked before any design work or simulation."""
+    if force is not None and Path(path).exists() and not force:
+        raise InputError(f"{path} exists; pass --force to overwrite")
     parent = Path(path).resolve().parent
     if not parent.is_dir():
         raise InputError(f"{what} {path}: folder {parent} does not exist")
@@ -85,7 +88,7 @@ def _write(path: Path, text: str) -> None:
 
 def run_gains(args) -> int:
     if args.json:
-        _writable_dir(args.json, "--json")
+        check_output(args.json, "--json")
     if args.header:
         if Path(args.header).is_dir():
             raise InputError(f"--header {args.header}: is a folder")
@@ -127,9 +130,7 @@ def run_gains(args) -> int:
 def run_params(args) -> int:
     text = params_from_args(args).to_toml()
     if args.out:
-        if Path(args.out).exists() and not args.force:
-            raise InputError(f"{args.out} exists; pass --force to overwrite")
-        _writable_dir(args.out, "--out")
+        check_output(args.out, "--out", force=args.force)
         _write(Path(args.out), text)
         print(f"wrote {args.out}")
     else:

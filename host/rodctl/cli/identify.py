@@ -11,7 +11,8 @@ from pathlib import Path
 
 from rodgains.errors import InputError, UserError
 
-from rodctl.cli.device import add_design_args, add_port_arg
+from rodctl.cli.common import add_design_args, add_port_arg
+from rodctl.cli.gains import check_output
 
 REST_RATE_RAD_S = 0.05  # the rod counts as at rest below this base rate ...
 REST_HOLD_S = 0.5  # ... for this long
@@ -35,14 +36,6 @@ def _nominal(args, meta: dict | None = None):
         if p is not None:
             return p, "the log's parameters"
     return load_params(), "defaults (gains/rodgains/default.toml): pass --params with your rod's measurements"
-
-
-def _check_out(args) -> None:
-    out = Path(args.out)
-    if out.exists() and not args.force:
-        raise InputError(f"{out} exists; pass --force to overwrite")
-    if not out.parent.exists():
-        raise InputError(f"--out {out}: folder {out.parent} does not exist")
 
 
 def _confirm(args, text: str) -> None:
@@ -127,7 +120,7 @@ def run_experiment(session, exp, log_path: Path, params, params_source: str):
 
 
 def run_port(args) -> int:
-    from rodctl.cli.device import design_params, stop_signals
+    from rodctl.cli.common import design_params, stop_signals
     from rodctl.ident import experiments as E
     from rodctl.link import protocol as P
     from rodctl.link.session import Session, reason_text
@@ -135,7 +128,7 @@ def run_port(args) -> int:
     if not 0 < args.scale <= 4:
         raise InputError(f"--scale must be in (0, 4], got {args.scale:g}")
     exps = [e.scaled(torque=args.scale) for e in E.select(args.experiment)]
-    _check_out(args)
+    check_output(args.out, "--out", force=args.force)
     log_dir = Path(args.log_dir)
     log_dir.mkdir(parents=True, exist_ok=True)
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
@@ -205,7 +198,7 @@ def run_identify(args) -> int:
     if args.starts < 1:
         raise InputError("--starts must be >= 1")
     if args.logs:
-        _check_out(args)
+        check_output(args.out, "--out", force=args.force)
         # A shell glob such as logs/*.csv also matches the CSV logs' event sidecars: not logs of their own.
         logs = [Path(p) for p in args.logs if not str(p).endswith((".events.csv", ".csv.json"))]
         return fit_logs(args, logs)

@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from rodctl.cli.gains import _shown_path, _writable_dir, add_param_args, params_from_args
+from rodctl.cli.gains import _shown_path, check_output, add_param_args, params_from_args
 
 
 def add_exec_args(p) -> None:
@@ -103,7 +103,7 @@ def run_robustness(args) -> int:
     check_score_args(args)
     for flag, path in (("--json", args.json), ("--plot", args.plot)):
         if path:
-            _writable_dir(path, flag)  # before the runs, not after them
+            check_output(path, flag)  # before the runs, not after them
     units = S.units(params, args.cases, args.samples, args.seed, args.seconds, plant=plant)
     t0 = time.monotonic()
     with Runner(args.jobs, args.scheduler) as runner:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from rodgains.errors import InputError, UserError
+from rodgains.errors import InputError
 
 from rodctl.cli.gains import add_param_args, params_from_args, regenerate_command
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rodgains.errors import InputError, UserError
+from rodgains.errors import InputError
 
 from rodctl.cli.gains import add_param_args, params_from_args
 

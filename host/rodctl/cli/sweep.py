@@ -9,7 +9,7 @@ from pathlib import Path
 
 from rodgains.errors import ParamError
 
-from rodctl.cli.gains import _shown_path, _writable_dir, add_param_args, params_from_args
+from rodctl.cli.gains import _shown_path, check_output, add_param_args, params_from_args
 from rodctl.cli.robustness import add_exec_args, add_score_args, check_score_args, command_line
 
 SCENARIOS = ("balance", "swingup", "score")
@@ -41,7 +41,7 @@ def run_sweep(args) -> int:
     plot = args.plot if args.plot is not None else str(Path(args.out).with_suffix(".png"))
     for flag, path in (("--out", args.out), ("--plot", plot)):
         if path:
-            _writable_dir(path, flag)  # before the runs, not after them
+            check_output(path, flag)  # before the runs, not after them
 
     per_point = len(S.units(params, args.cases, args.samples, args.seed, args.seconds)) if args.scenario == "score" else 1
     total = W.size(axes) * per_point

@@ -5,11 +5,10 @@ from __future__ import annotations
 import shlex
 import sys
 import time
-from pathlib import Path
 
-from rodgains.errors import UserError
+from rodgains.errors import InputError
 
-from rodctl.cli.gains import _writable_dir, add_param_args, params_from_args
+from rodctl.cli.gains import add_param_args, check_output, params_from_args
 from rodctl.cli.robustness import add_exec_args, add_score_args, check_score_args
 
 
@@ -33,8 +32,6 @@ def reproduce_command(args) -> str:
 
 
 def run_tune(args) -> int:
-    from rodgains.errors import InputError
-
     from rodctl.robust import score as S
     from rodctl.robust import tune as T
     from rodctl.robust.execute import Runner
@@ -44,9 +41,7 @@ def run_tune(args) -> int:
     check_score_args(args)
     if args.budget < 1:
         raise InputError(f"--budget {args.budget}: must be >= 1")
-    _writable_dir(args.out, "--out")
-    if Path(args.out).exists() and not args.force:
-        raise InputError(f"{args.out} exists; pass --force to overwrite")
+    check_output(args.out, "--out", force=args.force)
     dims = T.space(args.only)
     seed = params["uncertainty"]["seed"] if args.seed is None else args.seed
     samples = params["uncertainty"]["samples"] if args.samples is None else args.samples

@@ -24,7 +24,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from rodgains.errors import InputError, UserError
+from rodgains.errors import InputError
 from rodgains.params import Params
 
 TASKS = ("balance", "swingup")

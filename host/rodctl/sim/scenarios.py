@@ -28,7 +28,7 @@ from typing import Callable
 
 import numpy as np
 
-from rodgains.errors import InputError, UserError
+from rodgains.errors import InputError
 from rodgains.params import Params, load_params
 
 SETTLE_DEG = 1.0
