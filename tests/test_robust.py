@@ -409,3 +409,53 @@ def test_plant_option_judges_the_design_on_another_rod(tmp_path, capsys):
     assert docs["far"]["plant_source"] == str(far) and docs["own"]["plant_source"] is None
     assert docs["far"]["parameters"]["motor"]["rotor_inertia"] == load_params()["motor"]["rotor_inertia"]
     assert docs["far"]["plant_parameters"]["motor"]["rotor_inertia"] == 1.5e-6
+
+
+class _ScriptedRunner:
+    """Rows without simulations: every run passes except, when `slow`, the nominal (strict) ones."""
+
+    def __init__(self, slow: bool):
+        self.slow, self.ran = slow, []
+
+    def run(self, units, on_row=None, show=None):
+        rows = []
+        for u in units:
+            strict = u.case.strict
+            ok = not (self.slow and strict)
+            rows.append({"case": u.case.name, "task": u.task, "passed": ok, "settle_s": 3.0 if not ok else 0.5,
+                         "max_dev_deg": 30.0, "peak_torque_Nm": 0.2})
+            self.ran.append((u.case.name, u.task))
+        return rows
+
+
+def test_tune_goals_cut_a_slow_candidate_short_and_never_pick_it():
+    """`rodctl tune` keeps the nominal goals: a design that misses them runs only its two nominal runs,
+    scores nothing, and a feasible trial with a lower score still wins."""
+    import optuna
+
+    from rodctl.robust import tune as T
+
+    p = load_params()
+
+    def make(q):
+        return S.units(q, "quick", samples=1, seed=7, seconds=SECONDS)
+
+    slow = _ScriptedRunner(slow=True)
+    r = T.evaluate(p, slow, make, goals=True)
+    assert sorted(slow.ran) == [("nominal", "balance"), ("nominal", "swingup")]  # cut after the gate
+    # 1 per missed run + how far past its goal, in goal units: (1 + 1.5 s / 1.5 s) + (1 + 1 s / 2 s)
+    assert r["objective"] == 0.0 and r["violation"] == pytest.approx(3.5)
+    assert r["missed_goals"] == ["nominal/balance", "nominal/swingup"]
+    fast = _ScriptedRunner(slow=False)
+    r = T.evaluate(p, fast, make, goals=True)
+    assert len(fast.ran) == len(make(p)) and r["violation"] == 0.0 and r["score"] == 1.0
+    no_goals = _ScriptedRunner(slow=True)
+    r = T.evaluate(p, no_goals, make, goals=False)  # --no-goals: every run, the slow ones count as fails
+    assert len(no_goals.ran) == len(make(p)) and r["passed"] == len(make(p)) - 2
+
+    study = optuna.create_study(direction="maximize")
+    dist = {"x": optuna.distributions.FloatDistribution(0, 1)}
+    for n, (value, violation) in enumerate([(0.7, 0.0), (0.95, 2.5), (0.8, 0.0)]):
+        study.add_trial(optuna.trial.create_trial(params={"x": n / 3}, distributions=dist, value=value,
+                                                  user_attrs={"violation": violation}))
+    assert T.best_feasible(study).value == 0.8  # not the infeasible 0.95

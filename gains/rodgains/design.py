@@ -218,7 +218,7 @@ def design(p: Params) -> Design:
             Wa[n, n] = qw * dt
             La, _ = sampled.kalman_current(Aa, Ca, Wa, V / dt)
             L, Lw = La[:n], float(La[n, 0])
-        if p["design"]["method"] == "sampled":
+        if p["design"]["method"] in ("sampled", "robust"):
             K, _ = sampled.dlqr(Ad, Bd, Qd, Rd, Nd)
         else:
             K = K_c
@@ -226,6 +226,17 @@ def design(p: Params) -> Design:
         raise DesignRefused(f"design refused: discrete Riccati equation failed ({e})") from None
 
     d = Design(p, rod, dt, A, B, C, Ad, Bd, K, L, K_c, L_c, p["design"]["method"], checks=checks, Lw=Lw)
+    if d.method == "robust":  # the LQG gains refined to hold a family of rods (robust_design.py)
+        from .robust_design import refine
+
+        if Lw != 0.0:
+            Ao, Bo, Co, Ko, Lo = d.observer_matrices()
+        else:
+            Ao, Bo, Co, Ko, Lo = Ad, Bd, C, K, L
+        ref = refine(p, dt, Ao, Bo, Co, Ko, Lo, disturbance=Lw != 0.0)
+        d.K, d.L, d.Lw = ref.K, ref.L, ref.Lw
+        checks["robust_family_radii"] = ref.radii
+        checks["robust_family_radii_lqg"] = ref.radii_lqg
     rho = sampled.spectral_radius(d.loop())
     checks["closed_loop_spectral_radius"] = rho
     if not np.all(np.isfinite(K)) or not np.all(np.isfinite(L)):

@@ -29,6 +29,7 @@ class Key:
     kind: type  # int, float, bool or str
     unit: str
     check: Callable[[Any], str | None] | None = None  # returns a problem or None
+    default: Any = None  # not None: the key may be left out of a file (added after files were written)
 
 
 def _positive(v):
@@ -97,7 +98,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "rate_hz": Key(float, "Hz", _between(100, 10000)),
     },
     "design": {
-        "method": Key(str, "-", _choice("sampled", "continuous")),
+        "method": Key(str, "-", _choice("sampled", "continuous", "robust")),
+        # design.method = "robust" (rodgains/robust_design.py): the spectral radius every model of the
+        # family must stay below, and the fraction of the torque the loop must stay stable at (saturation)
+        "robust_radius": Key(float, "-", _between(0.9, 0.99999), default=0.9996),
+        "robust_gain_margin": Key(float, "-", _between(0.05, 1.0), default=0.3),
     },
     "lqr": {
         "q_angle": Key(float, "1/rad^2", _nonneg),
@@ -289,7 +294,10 @@ def validate(raw: dict, source: str = "parameters") -> dict:
         for key, spec in keys.items():
             name = f"{section}.{key}"
             if key not in raw.get(section, {}):
-                raise ParamError(f"{name}: missing key [{spec.unit}]")
+                if spec.default is None:
+                    raise ParamError(f"{name}: missing key [{spec.unit}]")
+                out[section][key] = spec.default
+                continue
             out[section][key] = _coerce(name, spec, raw[section][key])
     for name, problem in _cross_checks(out):
         raise ParamError(f"{name}: {problem}")

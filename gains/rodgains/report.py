@@ -114,6 +114,14 @@ def report_text(d: Design) -> str:
         f"sampled spectral radius {conf['state_feedback_radius']:.3g} (state feedback), "
         f"{conf['output_feedback_radius']:.3g} (with observer) -> {_verdict(conf['output_feedback_radius'])}",
     ]
+    fam = d.checks.get("robust_family_radii")
+    if fam:
+        lqg = d.checks["robust_family_radii_lqg"]
+        target = d.params["design"]["robust_radius"]
+        lines += ["", f"Robust refinement (design.method = robust): spectral radius on the design's model family, "
+                      f"LQG -> refined (target {target:g}):"]
+        lines += [f"  {name:28s} {lqg[name]:.5f} -> {r:.5f}" + ("  <- above target" if r > target + 1e-6 else "")
+                  for name, r in fam.items()]
     return "\n".join(lines) + "\n"
 
 

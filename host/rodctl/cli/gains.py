@@ -60,6 +60,11 @@ def generated_files(args) -> tuple[object, dict[Path, str]]:
     from rodgains.design import design
 
     p = params_from_args(args)
+    if p["design"]["method"] == "robust":  # seconds, not milliseconds: say so before the wait
+        import sys
+
+        print("rodctl: refining the gains on the robust model family (design.method = robust; about 15 s)",
+              file=sys.stderr, flush=True)
     d = design(p)
     command = regenerate_command(args)
     header = Path(args.header) if args.header else paths.COMMITTED_HEADER

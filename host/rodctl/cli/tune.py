@@ -24,6 +24,10 @@ def reproduce_command(args) -> str:
                     ("--only", args.only)):
         if v is not None:
             parts += [flag, str(v)]
+    for f in args.start_from:
+        parts += ["--start-from", f]
+    if not args.goals:
+        parts += ["--no-goals"]
     parts += ["--budget", str(args.budget)]
     if args.study:
         parts += ["--study", args.study]
@@ -49,8 +53,13 @@ def run_tune(args) -> int:
     def make_units(p):
         return S.units(p, args.cases, samples, seed, args.seconds)
 
+    from rodgains.params import load_params
+
+    starts = []
+    for f in args.start_from:
+        starts.append(load_params(f))
     meta = {"params_sha256": params.sha256(), "cases": args.cases, "samples": samples, "seed": seed,
-            "seconds": args.seconds, "space": [d.text(params) for d in dims]}
+            "seconds": args.seconds, "space": [d.text(params) for d in dims], "goals": args.goals}
     runs = len(make_units(params))
     t0 = time.monotonic()
     with Runner(args.jobs, args.scheduler) as runner:
@@ -58,7 +67,8 @@ def run_tune(args) -> int:
               f"plants: {samples}), budget {args.budget} trials, on the {runner.where}", file=sys.stderr)
         try:
             summary = T.tune(params, runner, dims=dims, budget=args.budget, make_units=make_units,
-                             study_dir=args.study, meta=meta, sampler_seed=seed)
+                             study_dir=args.study, meta=meta, sampler_seed=seed, goals=args.goals,
+                             starts=tuple(starts))
         except KeyboardInterrupt:
             if args.study:
                 print(f"rodctl: interrupted; every finished trial is kept in {args.study}; resume with: "
@@ -70,13 +80,14 @@ def run_tune(args) -> int:
     check = " ".join(shlex.quote(x) for x in ["rodctl", "robustness", "--params", args.out, "--cases", args.cases,
                                               "--samples", str(samples), "--seed", str(seed)]
                      + (["--seconds", str(args.seconds)] if args.seconds else []))
-    text = T.tuned_file(params, summary, dims, reproduce_command(args), check)
+    text = T.tuned_file(params, summary, dims, reproduce_command(args), check, goals=args.goals)
     atomic_write(args.out, text)
     b, s = summary["best"], summary["start"]
     print(f"start  (trial #{summary['start_number']}): score {s.get('score', 0):.4f} ({s.get('passed', 0)}/"
           f"{s.get('runs', 0)}), margin {s.get('margin', 0):.4f}")
     print(f"tuned  (trial #{summary['best_number']}): score {b.get('score', 0):.4f} ({b.get('passed', 0)}/"
-          f"{b.get('runs', 0)}), margin {b.get('margin', 0):.4f}")
+          f"{b.get('runs', 0)}), margin {b.get('margin', 0):.4f}"
+          + ("" if b.get("violation", 0.0) <= 0.0 else "  (misses the nominal goals: no trial met them)"))
     for k, v in summary["best_values"].items():
         print(f"  {k} = {T.fmt_value(v)}")
     print(f"wrote {args.out}  ({summary['trials']} trials, {wall:.0f} s in this session)")
@@ -96,6 +107,11 @@ def register(sub) -> None:
     add_exec_args(t)
     t.add_argument("--budget", type=int, default=100, metavar="N", help="finished trials in the study (default 100)")
     t.add_argument("--study", metavar="DIR", help="keep the trials in DIR/journal.log and resume from it")
+    t.add_argument("--start-from", action="append", default=[], metavar="TOML",
+                   help="also try this parameter file's values early (an earlier tune, a hand design); repeatable")
+    t.add_argument("--no-goals", dest="goals", action="store_false",
+                   help="score only; by default every trial must meet the nominal goals (balance settled by 1.5 s, "
+                        "swing-up caught by 5 s and settled 2 s after the catch) and a miss ends it early")
     t.add_argument("--only", metavar="KEYS", help="search only these parameters (comma-separated section.key)")
     t.add_argument("--out", required=True, metavar="TOML", help="write the tuned parameter file here")
     t.add_argument("--force", action="store_true", help="overwrite --out")
