@@ -31,6 +31,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg as sla
 from scipy.optimize import minimize
 
 from . import sampled
@@ -123,6 +124,32 @@ def radii(members: list[Member], Ao, Bo, Co, K, L) -> np.ndarray:
     return np.array([float(np.max(np.abs(np.linalg.eigvals(loop_matrix(mb, Ao, Bo, Co, K, L))))) for mb in members])
 
 
+def radius_gradient(mb: Member, Ao, Bo, Co, K, L) -> tuple[float, np.ndarray, np.ndarray]:
+    """Spectral radius of one member's loop and its gradient with respect to every entry of K and L.
+
+    First-order eigenvalue perturbation: with lambda the eigenvalue of largest modulus, x its right
+    and y its left eigenvector, d lambda = y^H dM x / y^H x, and every dM here is rank one (a row of
+    K or a column of L), so the whole gradient costs one eigendecomposition."""
+    M = loop_matrix(mb, Ao, Bo, Co, K, L)
+    w, vl, vr = sla.eig(M, left=True, right=True)
+    k = int(np.argmax(np.abs(w)))
+    lam, xr, yH = w[k], vr[:, k], vl[:, k].conj()
+    denom = yH @ xr
+    npl, no = mb.Ad.shape[0], Ao.shape[0]
+    a, b, c, e = xr[:npl], xr[npl:npl + no], yH[:npl], yH[npl:npl + no]
+    g, CBd = mb.gain, float((mb.C @ mb.Bd)[0, 0])
+    obs_in = (np.eye(no) - L @ Co) @ Bo[:, 0]  # how a change of the command enters the estimate
+    drift = (mb.C @ mb.Ad @ a)[0] - (Co @ (Ao - Bo @ K) @ b)[0]
+    if mb.delay == 0:
+        sK = c @ (-g * mb.Bd[:, 0]) - e @ obs_in - g * CBd * (e @ L[:, 0])
+        tL = drift - g * CBd * (K @ b)[0]
+    else:  # the command enters the plant through the delay line; its first slot is -K xhat
+        sK = -yH[npl + no] - e @ obs_in
+        tL = drift + g * CBd * xr[-1]
+    f = np.conj(lam) / abs(lam)
+    return float(abs(lam)), np.real(f * sK * b / denom), np.real(f * e * tL / denom)
+
+
 @dataclass
 class Refined:
     K: np.ndarray  # [1, 2N]
@@ -161,13 +188,23 @@ def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refi
         return K, L
 
     def cost(x):
-        r = radii(members, Ao, Bo, Co, *gains(x))
+        """The penalty and its gradient in x (analytic: radius_gradient)."""
+        K, L = gains(x)
+        out = [radius_gradient(mb, Ao, Bo, Co, K, L) for mb in members]
+        r = np.array([o[0] for o in out])
         v = np.maximum(r - target, 0.0)
-        return NOMINAL_WEIGHT * r[nominal].max() + 5e4 * np.sum(v**2) + 10.0 * np.sum(v) + 1e-4 * np.sum(x**2)
+        inom = int(np.flatnonzero(nominal)[np.argmax(r[nominal])])
+        weight = 1e5 * v + 10.0 * (v > 0)
+        weight[inom] += NOMINAL_WEIGHT
+        dK = sum(wt * o[1] for wt, o in zip(weight, out) if wt)
+        dL = sum(wt * o[2] for wt, o in zip(weight, out) if wt)
+        grad = np.concatenate([dK[:nK] * Ko[0, :nK], dL * Lo[:, 0]]) + 2e-4 * x
+        return NOMINAL_WEIGHT * r[inom] + 5e4 * np.sum(v**2) + 10.0 * np.sum(v) + 1e-4 * np.sum(x**2), grad
 
     x0 = np.zeros(nK + nL)
-    res = minimize(cost, x0, method="L-BFGS-B", bounds=[SCALE_BOUNDS] * len(x0), options={"maxiter": MAX_ITER})
-    x = res.x if cost(res.x) <= cost(x0) else x0
+    res = minimize(cost, x0, jac=True, method="L-BFGS-B", bounds=[SCALE_BOUNDS] * len(x0),
+                   options={"maxiter": MAX_ITER})
+    x = res.x if cost(res.x)[0] <= cost(x0)[0] else x0
     K, L = gains(x)
     names = [mb.name for mb in members]
     n = Ko.shape[1] - (1 if disturbance else 0)

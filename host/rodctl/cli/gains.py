@@ -63,7 +63,7 @@ def generated_files(args) -> tuple[object, dict[Path, str]]:
     if p["design"]["method"] == "robust":  # seconds, not milliseconds: say so before the wait
         import sys
 
-        print("rodctl: refining the gains on the robust model family (design.method = robust; about 15 s)",
+        print("rodctl: refining the gains on the robust model family (design.method = robust; a few seconds)",
               file=sys.stderr, flush=True)
     d = design(p)
     command = regenerate_command(args)
