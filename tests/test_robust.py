@@ -459,3 +459,14 @@ def test_tune_goals_cut_a_slow_candidate_short_and_never_pick_it():
         study.add_trial(optuna.trial.create_trial(params={"x": n / 3}, distributions=dist, value=value,
                                                   user_attrs={"violation": violation}))
     assert T.best_feasible(study).value == 0.8  # not the infeasible 0.95
+
+
+def test_tune_searches_the_robust_refinement_only_for_robust_designs():
+    from rodctl.robust.tune import ROBUST_ONLY, space
+
+    assert not {d.name for d in space(None, load_params())} & set(ROBUST_ONLY)  # they change nothing there
+    robust = load_params(None, ["design.method=robust"])
+    dims = {d.name: d for d in space(None, robust)}
+    assert set(ROBUST_ONLY) <= set(dims)
+    lo, hi = dims["design.robust_radius"].bounds(robust)
+    assert lo < robust["design"]["robust_radius"] < hi < 1.0  # never a target the loop cannot meet

@@ -78,8 +78,6 @@ def test_bad_robust_settings_give_one_line_and_exit_2(override, needle, tmp_path
 def test_analytic_radius_gradient_matches_finite_differences(lqg):
     """The refinement's gradient (first-order eigenvalue perturbation), on a plain member, a delayed one
     and a torque-scaled one, against one-sided differences of the radius itself."""
-    import numpy as np
-
     from rodgains import robust_design as R
 
     Ao, Bo, Co, Ko, Lo = lqg.observer_matrices()

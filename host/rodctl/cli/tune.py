@@ -46,7 +46,7 @@ def run_tune(args) -> int:
     if args.budget < 1:
         raise InputError(f"--budget {args.budget}: must be >= 1")
     check_output(args.out, "--out", force=args.force)
-    dims = T.space(args.only)
+    dims = T.space(args.only, params)
     seed = params["uncertainty"]["seed"] if args.seed is None else args.seed
     samples = params["uncertainty"]["samples"] if args.samples is None else args.samples
 

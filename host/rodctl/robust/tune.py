@@ -80,12 +80,19 @@ SPACE: tuple[Dim, ...] = (
     Dim("swing_up.energy_target", 0.8, 1.2, why="pump toward this fraction of the upright energy [-]"),
     Dim("swing_up.rate_filter_hz", 1.0, 20.0, log=True, why="low-pass on the base rate the pump reads [Hz]"),
     Dim("swing_up.catch_angle_deg", 10.0, 45.0, why="switch to balance within this of upright [deg]"),
+    # searched only for design.method = "robust" (they change nothing otherwise)
+    Dim("design.robust_radius", 0.999, 0.99995, why="spectral radius the model family must stay below [-]"),
+    Dim("design.robust_gain_margin", 0.1, 0.8, log=True, why="torque fraction the loop must hold [-]"),
 )
+ROBUST_ONLY = ("design.robust_radius", "design.robust_gain_margin")
 
 
-def space(only: str | None = None) -> tuple[Dim, ...]:
-    """The searched dimensions (those the parameter schema has), or the subset `only` (comma-separated)."""
-    known = tuple(d for d in SPACE if d.name.split(".")[1] in SCHEMA.get(d.name.split(".")[0], {}))
+def space(only: str | None = None, params: Params | None = None) -> tuple[Dim, ...]:
+    """The searched dimensions (those the parameter schema has, and the robust refinement's only when
+    `params` use it), or the subset `only` (comma-separated)."""
+    robust = params is not None and params["design"]["method"] == "robust"
+    known = tuple(d for d in SPACE if d.name.split(".")[1] in SCHEMA.get(d.name.split(".")[0], {})
+                  and (robust or d.name not in ROBUST_ONLY))
     if not only:
         return known
     names = [x.strip() for x in only.split(",") if x.strip()]
