@@ -246,6 +246,8 @@ def tune(params: Params, runner, *, dims: tuple[Dim, ...], budget: int, make_uni
             b = best_feasible(study)
         except ValueError:
             return "best -"
+        if b.user_attrs.get("violation", 0.0) > 0.0:
+            return f"no trial meets the nominal goals yet (closest #{b.number})"
         return f"best {b.user_attrs.get('score', 0):.4f} (#{b.number})"
 
     try:
