@@ -30,7 +30,13 @@ GOALS = {
     "plot_peak_memory_mb": (1000, "<=", "MB", "peak resident memory of that `rodctl plot` process"),
     "robustness_runs_per_s_per_core": (None, "", "runs/s", "matrix runs (both tasks) on one local worker"),
     "robustness_scaling_1_to_2_workers": (1.7, ">=", "x", "matrix runs/s with 2 local workers / with 1"),
+    "nominal_balance_settle_s": (1.5, "<=", "s", "faithful plant, from 30 deg, every link within 1 deg (issue 8; goal 1.0)"),
+    "nominal_swingup_catch_s": (5.0, "<=", "s", "faithful plant, swing-up from rest to the catch"),
+    "nominal_swingup_settle_s": (2.0, "<=", "s", "faithful plant, every link within 1 deg after the catch"),
+    "matrix_runs_passing": (52, ">=", "runs", "robustness matrix on the faithful plant, of 52 (README scenario table)"),
+    "longest_rod_ratio": (1.3, ">=", "x L_crit", "longest rod held from 10 deg, design redone per length (LONG_ROD_DESIGNS)"),
 }
+GROUPS = ("gains", "m4", "sil", "host", "robust", "control")
 
 
 def _gains_seconds(edges: int, repeats: int = 3) -> float:
@@ -75,6 +81,10 @@ def measure(groups: set[str], quick: bool = False) -> dict:
         from rodctl.bench import robust as bench_robust
 
         out.update(bench_robust.measure(quick=quick))
+    if "control" in groups:
+        from rodctl.bench import control as bench_control
+
+        out.update(bench_control.measure(quick=quick))
     if "host" in groups:
         from rodctl.bench.protocol import measure_decode_rate
 
@@ -94,12 +104,12 @@ def verdict(key: str, value: float) -> str:
 
 
 def run_bench(args) -> int:
-    groups = set(args.only.split(",")) if args.only else {"gains", "m4", "sil", "host", "robust"}
-    unknown = groups - {"gains", "m4", "sil", "host", "robust"}
+    groups = set(args.only.split(",")) if args.only else set(GROUPS)
+    unknown = groups - set(GROUPS)
     if unknown:
-        raise InputError(f"--only {args.only}: unknown group(s) {', '.join(sorted(unknown))}; gains, m4, sil, host, robust")
+        raise InputError(f"--only {args.only}: unknown group(s) {', '.join(sorted(unknown))}; {', '.join(GROUPS)}")
     results = {}
-    for g in ("gains", "m4", "sil", "host", "robust"):
+    for g in GROUPS:
         if g in groups:
             print(f"measuring {g} ...", file=sys.stderr, flush=True)
             results.update(measure({g}, quick=args.quick))
@@ -123,6 +133,6 @@ def register(sub) -> None:
                                    "counts come from QEMU (../shared/tools/m4-icount.sh); speeds are medians of "
                                    "repeated runs. Exit 1 when a goal is missed.")
     b.add_argument("--json", metavar="PATH", help="write the results as JSON")
-    b.add_argument("--only", metavar="GROUPS", help="comma-separated subset of: gains, m4, sil, host, robust")
+    b.add_argument("--only", metavar="GROUPS", help="comma-separated subset of: " + ", ".join(GROUPS))
     b.add_argument("--quick", action="store_true", help="shorter runs (noisier)")
     b.set_defaults(func=run_bench)
