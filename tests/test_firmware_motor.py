@@ -20,7 +20,7 @@ def motor(sil):
 def test_stall_duty_is_current_times_resistance_over_supply(sil):
     kt, ke, R, V, _ = motor(sil)
     tau = sil.catch_at(488)  # at rest: no back-EMF; 0.6 deg from upright stays below the torque limit
-    assert sil.rate == 0.0
+    assert sil.rate == 0.0  # the shaft at rest [rad/s], simulated
     assert 0.0 < abs(tau) < 0.2
     current = tau / kt
     assert sil.duty == pytest.approx(current * R / V, rel=1e-5)
@@ -32,15 +32,15 @@ def test_back_emf_adds_to_the_voltage_in_the_direction_of_motion(sil):
     sil.arm(2)
     for k in range(20):  # moving + at ~13 rad/s through the bottom
         tau = sil.step(-20 + 2 * k)
-    rate = sil.rate
-    assert rate > 5.0 and tau == pytest.approx(amplitude, rel=1e-6)
-    assert sil.duty == pytest.approx((tau / kt * R + ke * rate) / V, rel=1e-5)
+    shaft_rad_s = sil.rate  # the firmware's estimate of the simulated shaft's angular rate, not a wall-clock speed
+    assert shaft_rad_s > 5.0 and tau == pytest.approx(amplitude, rel=1e-6)
+    assert sil.duty == pytest.approx((tau / kt * R + ke * shaft_rad_s) / V, rel=1e-5)
     assert sil.duty > tau / kt * R / V  # more than at stall
     for k in range(30):  # and moving - : torque and back-EMF both negative
         tau = sil.step(20 - 2 * k)
-    rate = sil.rate
-    assert rate < -5.0 and tau == pytest.approx(-amplitude, rel=1e-6)
-    assert sil.duty == pytest.approx((tau / kt * R + ke * rate) / V, rel=1e-5)
+    shaft_rad_s = sil.rate
+    assert shaft_rad_s < -5.0 and tau == pytest.approx(-amplitude, rel=1e-6)
+    assert sil.duty == pytest.approx((tau / kt * R + ke * shaft_rad_s) / V, rel=1e-5)
     assert sil.duty < tau / kt * R / V
 
 
@@ -67,6 +67,6 @@ def test_duty_is_limited_and_the_torque_reported_is_what_the_supply_gives(sil):
             clamped.append((tau, sil.duty, sil.rate))
     assert sil.mode == MODE["SWING_UP"]
     assert clamped, "never reached the duty limit"
-    for tau, duty, rate in clamped:
-        assert tau == pytest.approx((duty * V - ke * rate) / R * kt, rel=1e-4)
+    for tau, duty, shaft_rad_s in clamped:
+        assert tau == pytest.approx((duty * V - ke * shaft_rad_s) / R * kt, rel=1e-4)
         assert abs(tau) < tmax
