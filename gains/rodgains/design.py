@@ -105,14 +105,19 @@ class Design:
         Lo = np.vstack([self.L, [[self.Lw]]])
         return Ao, Bo, Co, Ko, Lo
 
-    def loop(self, actuator_gain: complex = 1.0, Ad=None, Bd=None) -> np.ndarray:
-        """The sampled loop: plant (Ad, Bd; default the design model) with the firmware's estimator."""
-        if self.Lw == 0.0:  # no disturbance state: w stays 0 (its eigenvalue 1 is not part of the loop)
-            return sampled.closed_loop(self.Ad if Ad is None else Ad, self.Bd if Bd is None else Bd, self.C, self.K,
-                                       self.L, Ad_obs=self.Ad, Bd_obs=self.Bd, actuator_gain=actuator_gain)
-        Ao, Bo, Co, Ko, Lo = self.observer_matrices()
+    def estimator(self):
+        """(Ao, Bo, Co, K, L) the firmware runs: observer_matrices() with a disturbance state, else the
+        plain design (no w: its eigenvalue 1 would not be part of the loop)."""
+        if self.Lw == 0.0:
+            return self.Ad, self.Bd, self.C, self.K, self.L
+        return self.observer_matrices()
+
+    def loop(self, actuator_gain: complex = 1.0, Ad=None, Bd=None, delay: int = 0) -> np.ndarray:
+        """The sampled loop: plant (Ad, Bd; default the design model) with the firmware's estimator;
+        delay: extra periods before the command reaches the plant."""
+        Ao, Bo, Co, Ko, Lo = self.estimator()
         return sampled.closed_loop(self.Ad if Ad is None else Ad, self.Bd if Bd is None else Bd, self.C, Ko, Lo,
-                                   Ad_obs=Ao, Bd_obs=Bo, actuator_gain=actuator_gain, C_obs=Co)
+                                   Ad_obs=Ao, Bd_obs=Bo, actuator_gain=actuator_gain, C_obs=Co, delay=delay)
 
     def to_statespace(self) -> StateSpaces:
         """python-control StateSpace models: (open_loop, open_loop_sampled, closed_loop).
@@ -229,17 +234,13 @@ def design(p: Params) -> Design:
     if d.method == "robust":  # the LQG gains refined to hold a family of rods (robust_design.py)
         from .robust_design import refine
 
-        if Lw != 0.0:
-            Ao, Bo, Co, Ko, Lo = d.observer_matrices()
-        else:
-            Ao, Bo, Co, Ko, Lo = Ad, Bd, C, K, L
-        ref = refine(p, dt, Ao, Bo, Co, Ko, Lo, disturbance=Lw != 0.0)
+        ref = refine(p, dt, *d.estimator(), disturbance=Lw != 0.0)
         d.K, d.L, d.Lw = ref.K, ref.L, ref.Lw
         checks["robust_family_radii"] = ref.radii
         checks["robust_family_radii_lqg"] = ref.radii_lqg
     rho = sampled.spectral_radius(d.loop())
     checks["closed_loop_spectral_radius"] = rho
-    if not np.all(np.isfinite(K)) or not np.all(np.isfinite(L)):
+    if not np.all(np.isfinite(d.K)) or not np.all(np.isfinite(d.L)):
         raise DesignRefused("design refused: gains are not finite")
     if rho >= 1.0:
         raise DesignRefused(

@@ -48,18 +48,7 @@ def paper_continuous_sampled(d: Design, bare: bool) -> dict:
 
 def one_period_delay_radius(d: Design) -> float:
     """Spectral radius when the torque reaches the rod one period late (observer unaware)."""
-    n = d.Ad.shape[0]
-    Ao, Bo, Co, Ko, Lo = d.observer_matrices() if d.Lw else (d.Ad, d.Bd, d.C, d.K, d.L)
-    no = Ao.shape[0]
-    # state [x_k, xhat_k, u_{k-1}]: the plant runs on the delayed command
-    M = np.zeros((n + no + 1, n + no + 1))
-    M[:n, :n] = d.Ad
-    M[:n, n + no :] = d.Bd
-    M[n : n + no, :n] = Lo @ d.C @ d.Ad
-    M[n : n + no, n : n + no] = (np.eye(no) - Lo @ Co) @ (Ao - Bo @ Ko)
-    M[n : n + no, n + no :] = Lo @ d.C @ d.Bd
-    M[n + no :, n : n + no] = -Ko
-    return sampled.spectral_radius(M)
+    return sampled.spectral_radius(d.loop(delay=1))
 
 
 def report_text(d: Design) -> str:

@@ -102,22 +102,8 @@ def family(p: Params, dt: float) -> list[Member]:
 
 def loop_matrix(mb: Member, Ao, Bo, Co, K, L) -> np.ndarray:
     """The sampled loop of one member with the firmware's estimator (Ao, Bo, Co) and gains (K, L)."""
-    if mb.delay == 0:
-        return sampled.closed_loop(mb.Ad, mb.Bd, mb.C, K, L, Ad_obs=Ao, Bd_obs=Bo, actuator_gain=mb.gain, C_obs=Co)
-    # state [x_k, xhat_k, u_{k-1}, ...]: the plant runs on the command of `delay` periods before
-    npl, no, d = mb.Ad.shape[0], Ao.shape[0], mb.delay
-    n = npl + no + d
-    M = np.zeros((n, n))
-    LC, LCo = L @ mb.C, L @ Co
-    M[:npl, :npl] = mb.Ad
-    M[:npl, n - 1:] = mb.gain * mb.Bd
-    M[npl:npl + no, :npl] = LC @ mb.Ad
-    M[npl:npl + no, npl:npl + no] = (np.eye(no) - LCo) @ (Ao - Bo @ K)
-    M[npl:npl + no, n - 1:] = mb.gain * LC @ mb.Bd
-    M[npl + no, npl:npl + no] = -K[0]
-    for i in range(1, d):
-        M[npl + no + i, npl + no + i - 1] = 1.0
-    return M
+    return sampled.closed_loop(mb.Ad, mb.Bd, mb.C, K, L, Ad_obs=Ao, Bd_obs=Bo, actuator_gain=mb.gain, C_obs=Co,
+                               delay=mb.delay)
 
 
 def radii(members: list[Member], Ao, Bo, Co, K, L) -> np.ndarray:

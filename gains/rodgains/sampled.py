@@ -73,13 +73,16 @@ def kalman_current(Ad, C, Wd, V):
     return L, P
 
 
-def closed_loop(Ad, Bd, C, K, L, Ad_obs=None, Bd_obs=None, actuator_gain: complex = 1.0, C_obs=None):
+def closed_loop(Ad, Bd, C, K, L, Ad_obs=None, Bd_obs=None, actuator_gain: complex = 1.0, C_obs=None,
+                delay: int = 0):
     """Linear sampled loop: plant (Ad, Bd) with the firmware's observer (Ad_obs, Bd_obs) and LQR.
 
     State [x_k, xhat_k] after the measurement update at step k. The actuator multiplies the
     command by `actuator_gain` (real: gain margin, unit complex: phase margin); the observer
     predicts with the command it sent. The observer may carry more states than the plant (an
     estimated input disturbance): then Ad_obs, Bd_obs, C_obs and K are the observer's size.
+    delay: extra periods before the command reaches the plant (the observer does not know); the
+    state then ends with the commands in flight [u_k, ..., u_{k-delay+1}].
     """
     Ao = Ad if Ad_obs is None else Ad_obs
     Bo = Bd if Bd_obs is None else Bd_obs
@@ -87,9 +90,22 @@ def closed_loop(Ad, Bd, C, K, L, Ad_obs=None, Bd_obs=None, actuator_gain: comple
     LC = L @ C
     LCo = LC if C_obs is None else L @ C_obs
     I = np.eye(no)
-    top = np.hstack([Ad, -actuator_gain * Bd @ K])
-    bottom = np.hstack([LC @ Ad, (I - LCo) @ (Ao - Bo @ K) - actuator_gain * LC @ Bd @ K])
-    return np.vstack([top, bottom])
+    if delay == 0:
+        top = np.hstack([Ad, -actuator_gain * Bd @ K])
+        bottom = np.hstack([LC @ Ad, (I - LCo) @ (Ao - Bo @ K) - actuator_gain * LC @ Bd @ K])
+        return np.vstack([top, bottom])
+    npl = Ad.shape[0]
+    n = npl + no + delay
+    M = np.zeros((n, n), dtype=np.result_type(Ad, actuator_gain))
+    M[:npl, :npl] = Ad
+    M[:npl, n - 1:] = actuator_gain * Bd  # the plant runs on the oldest command in flight
+    M[npl:npl + no, :npl] = LC @ Ad
+    M[npl:npl + no, npl:npl + no] = (I - LCo) @ (Ao - Bo @ K)
+    M[npl:npl + no, n - 1:] = actuator_gain * LC @ Bd
+    M[npl + no, npl:npl + no] = -K[0]
+    for i in range(1, delay):
+        M[npl + no + i, npl + no + i - 1] = 1.0
+    return M
 
 
 def spectral_radius(M: np.ndarray) -> float:

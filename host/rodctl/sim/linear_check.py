@@ -44,21 +44,9 @@ def loop_radius(d: Design, plant_p, delay_periods: int = 0, actuator_gain: float
     Ad, Bd = sampled.zoh(A, B, d.dt)
     C = np.zeros((1, 2 * n))
     C[0, 0] = 1.0
-    Ao, Bo, Co, Ko, Lo = d.observer_matrices()
-    if delay_periods == 0:
-        M = sampled.closed_loop(Ad, Bd, C, Ko, Lo, Ad_obs=Ao, Bd_obs=Bo, actuator_gain=actuator_gain, C_obs=Co)
-        return _radius(M)
-    # state [x_k, xhat_k, u_{k-1}]: the plant runs on the command of the period before
-    npl, no = Ad.shape[0], Ao.shape[0]
-    LC, LCo = Lo @ C, Lo @ Co
-    M = np.zeros((npl + no + 1, npl + no + 1))
-    M[:npl, :npl] = Ad
-    M[:npl, npl + no:] = actuator_gain * Bd
-    M[npl:npl + no, :npl] = LC @ Ad
-    M[npl:npl + no, npl:npl + no] = (np.eye(no) - LCo) @ (Ao - Bo @ Ko)
-    M[npl:npl + no, npl + no:] = actuator_gain * LC @ Bd
-    M[npl + no:, npl:npl + no] = -Ko
-    return _radius(M)
+    Ao, Bo, Co, Ko, Lo = d.estimator()
+    return _radius(sampled.closed_loop(Ad, Bd, C, Ko, Lo, Ad_obs=Ao, Bd_obs=Bo, actuator_gain=actuator_gain, C_obs=Co,
+                                       delay=delay_periods))
 
 
 def corner_radii(d: Design) -> list[tuple[str, float]]:
