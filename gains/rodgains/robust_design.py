@@ -193,6 +193,6 @@ def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refi
     x = res.x if cost(res.x)[0] <= cost(x0)[0] else x0
     K, L = gains(x)
     names = [mb.name for mb in members]
-    n = Ko.shape[1] - (1 if disturbance else 0)
-    return Refined(K[:, :n], L[:n], float(L[n, 0]) if disturbance else 0.0, dict(zip(names, radii(members, Ao, Bo, Co, K, L).tolist())),
+    return Refined(K[:, :nK], L[:nK], float(L[nK, 0]) if disturbance else 0.0,
+                   dict(zip(names, radii(members, Ao, Bo, Co, K, L).tolist())),
                    dict(zip(names, radii(members, Ao, Bo, Co, Ko, Lo).tolist())), int(res.nit))

@@ -55,9 +55,7 @@ def run_tune(args) -> int:
 
     from rodgains.params import load_params
 
-    starts = []
-    for f in args.start_from:
-        starts.append(load_params(f))
+    starts = [load_params(f) for f in args.start_from]
     meta = {"params_sha256": params.sha256(), "cases": args.cases, "samples": samples, "seed": seed,
             "seconds": args.seconds, "space": [d.text(params) for d in dims], "goals": args.goals}
     runs = len(make_units(params))
