@@ -68,6 +68,7 @@ def run_tune(args) -> int:
                              study_dir=args.study, meta=meta, sampler_seed=seed, goals=args.goals,
                              starts=tuple(starts))
         except KeyboardInterrupt:
+            runner.close(abandon=True)  # the message below, not the workers' wind-down, ends the command
             if args.study:
                 print(f"rodctl: interrupted; every finished trial is kept in {args.study}; resume with: "
                       f"{reproduce_command(args)}", file=sys.stderr)

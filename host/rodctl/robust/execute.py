@@ -134,13 +134,17 @@ class Runner:
     def __enter__(self) -> "Runner":
         return self
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def __exit__(self, exc_type, *exc) -> None:
+        self.close(abandon=exc_type is not None)
 
-    def close(self) -> None:
+    def close(self, abandon: bool = False) -> None:
+        """Stop the pool: wait for its workers, or with `abandon` (Ctrl-C, an error) stop them now."""
         if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._pool = None
+            if abandon:
+                self._abandon_pool()
+            else:
+                self._pool.shutdown(wait=True, cancel_futures=True)
+                self._pool = None
         if self._client is not None:
             self._client.close()
             self._client = None
@@ -156,6 +160,16 @@ class Runner:
         if self._pool is None:
             return []
         return sorted(p.pid for p in list(getattr(self._pool, "_processes", {}).values()) if p.pid)
+
+    def _abandon_pool(self) -> None:
+        """Stop the local pool without waiting. Its workers ignore Ctrl-C (_pool_worker_init), and a
+        pool left to wind down while the interpreter exits can hold that exit up (its manager thread
+        is joined at exit), so they are terminated: a run holds nothing to save, and every finished
+        row is already in this process."""
+        for proc in list(getattr(self._pool, "_processes", {}).values()):
+            proc.terminate()
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        self._pool = None
 
     # -- running ----------------------------------------------------------------------------------
     def run(self, units: Iterable[Unit], *, desc: str = "runs", on_row: Callable[[Unit, dict], None] | None = None,
@@ -216,8 +230,7 @@ class Runner:
                         raise UserError(f"a pool worker died {MAX_ATTEMPTS} times running {_describe(units[i])}")
                 todo.extend(lost[::-1])
             except BaseException:
-                self._pool.shutdown(wait=False, cancel_futures=True)
-                self._pool = None
+                self._abandon_pool()
                 raise
 
     def _run_dask(self, units: list[Unit], done: Callable[[int, dict], None]) -> None:
@@ -277,8 +290,8 @@ def dispatch_order(units: list[Unit]) -> list[int]:
 
 
 def _pool_worker_init() -> None:
-    # Ctrl-C reaches the whole process group: the parent stops the pool, so the workers finish the run
-    # in hand quietly instead of each printing a traceback.
+    # Ctrl-C reaches the whole process group: the parent stops the pool (Runner._abandon_pool), so the
+    # workers leave that to it instead of each printing a traceback.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     # A parent killed outright (SIGTERM, SIGKILL) cannot stop its pool: the workers notice the orphaning.
     parent = os.getppid()
