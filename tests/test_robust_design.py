@@ -17,6 +17,7 @@ from rodctl.sim import linear_check, matrix
 from host_tools import run_rodctl
 
 ROBUST_FILE = paths.REPO / "docs/tuned/robust-damping.toml"
+MATRIX_FILE = paths.REPO / "docs/tuned/robust-matrix.toml"  # + design.robust_nominal_decay = 2.5
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +65,74 @@ def test_files_written_before_the_robust_keys_still_load(tmp_path):
     assert p["design"]["robust_radius"] == 0.9996 and p["design"]["robust_gain_margin"] == 0.3
 
 
+def _slowest_nominal_decay(d) -> float:
+    """Decay rate [1/s] of the slowest mode of the design-order nominal model's sampled loop."""
+    import numpy as np
+
+    from rodgains import robust_design as R
+
+    Ao, Bo, Co, Ko, Lo = d.estimator()
+    mb = next(m for m in R.family(d.params, d.dt) if m.nominal)
+    radius = np.abs(np.linalg.eigvals(R.loop_matrix(mb, Ao, Bo, Co, Ko, Lo))).max()
+    return float(-np.log(radius) / d.dt)
+
+
+def test_nominal_decay_makes_every_nominal_mode_faster():
+    """design.robust_nominal_decay 2.5 /s: the slowest nominal mode goes from 1.5 /s to at least
+    2.5 /s (a penalty: allowed 0.1 /s short of it)."""
+    fast = design(load_params(MATRIX_FILE))
+    slow = design(load_params(MATRIX_FILE, ["design.robust_nominal_decay=0"]))
+    assert _slowest_nominal_decay(slow) < 1.6
+    assert _slowest_nominal_decay(fast) > 2.4
+
+
+def test_nominal_decay_penalty_gradient_matches_finite_differences():
+    """The gradient of every mode above the floor (not only the slowest) against one-sided
+    differences of the summed penalty sum (|lambda| - floor)^2."""
+    import math
+
+    from rodgains import robust_design as R
+
+    d = design(load_params(MATRIX_FILE, ["design.method=sampled"]))
+    Ao, Bo, Co, Ko, Lo = d.estimator()
+    mb = next(m for m in R.family(d.params, d.dt) if m.nominal)
+    floor = math.exp(-15.0 * d.dt)
+
+    def penalty(K, L):
+        return sum((mag - floor) ** 2 for mag, _, _ in R.eigen_gradients(mb, Ao, Bo, Co, K, L, floor))
+
+    out = R.eigen_gradients(mb, Ao, Bo, Co, Ko, Lo, floor)
+    assert len(out) >= 3  # several modes, not only the slowest
+    gK = sum(2 * (mag - floor) * g for mag, g, _ in out)
+    gL = sum(2 * (mag - floor) * g for mag, _, g in out)
+    h, base = 1e-7, penalty(Ko, Lo)
+    for j in (0, 3, 9):
+        K2 = Ko.copy()
+        K2[0, j] += h
+        assert gK[j] == pytest.approx((penalty(K2, Lo) - base) / h, rel=1e-3, abs=1e-9), ("K", j)
+    for i in (0, 8):
+        L2 = Lo.copy()
+        L2[i, 0] += h
+        assert gL[i] == pytest.approx((penalty(Ko, L2) - base) / h, rel=1e-3, abs=1e-9), ("L", i)
+
+
+@pytest.mark.parametrize("case,task", [("nominal", "balance"), ("nominal", "swingup"), ("damping*10", "balance"),
+                                       ("damping*10", "swingup"), ("coulomb*2", "swingup")])
+def test_matrix_file_meets_the_nominal_goals_and_holds_ten_times_the_damping(case, task):
+    """docs/tuned/robust-matrix.toml in the SIL on the faithful plant: nominal balance within 1 deg by
+    1.5 s, swing-up settled within 2 s of the catch (the nominal cases' strict criterion), and damping
+    x10 and Coulomb x2 within 3 deg at the end."""
+    r = matrix.run_case(load_params(MATRIX_FILE), matrix.CASES[case], task)
+    assert r["passed"], r
+    assert r["fault_reason"] == 0
+    if case == "nominal" and task == "balance":
+        assert r["settle_s"] < 1.3
+    if case == "damping*10":
+        assert r["final_dev_deg"] < 1.0
+
+
 @pytest.mark.parametrize("override,needle", [("design.robust_radius=1.2", "design.robust_radius: must be between"),
+                                             ("design.robust_nominal_decay=-1", "design.robust_nominal_decay: must be"),
                                              ("design.robust_gain_margin=0", "design.robust_gain_margin: must be"),
                                              ("design.method=hinf", "design.method: must be one of")])
 def test_bad_robust_settings_give_one_line_and_exit_2(override, needle, tmp_path):

@@ -103,6 +103,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         # family must stay below, and the fraction of the torque the loop must stay stable at (saturation)
         "robust_radius": Key(float, "-", _between(0.9, 0.99999), default=0.9996),
         "robust_gain_margin": Key(float, "-", _between(0.05, 1.0), default=0.3),
+        # ... and every mode of the nominal models decays at least this fast (0: only the slowest is pushed)
+        "robust_nominal_decay": Key(float, "1/s", _between(0.0, 50.0), default=0.0),
     },
     "lqr": {
         "q_angle": Key(float, "1/rad^2", _nonneg),

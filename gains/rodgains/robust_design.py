@@ -10,7 +10,8 @@ How: start from the sampled LQG gains (K, L and the disturbance gain) and scale 
 L-BFGS on a smooth penalty, so that every model of a family stays below `design.robust_radius`
 (spectral radius of the sampled loop with the firmware's estimator; a penalty, so a member may end
 up to about 1e-4 above it), while the slowest mode of the nominal models is made as fast as that
-allows. The family is the designer's own paper model, never
+allows, and (design.robust_nominal_decay > 0) every nominal mode slower than that rate is penalized:
+two lightly damped loop modes, not only the slowest, kept the nominal rod ringing for 2 s (README). The family is the designer's own paper model, never
 the simulated plant that judges the result:
   - the design model (rod.edges) and one of twice its order, each with the rod damping
     x 1/f, 1, f (f = uncertainty.rod_damping_factor), joint damping scaled Kelvin-Voigt (d N / 5,
@@ -42,6 +43,7 @@ from .rod_model import RodModel
 DAMPING_REFERENCE_EDGES = 5  # rod.damping is the joint damping of Table I's N = 5 rod (Kelvin-Voigt)
 NOMINAL_WEIGHT = 3.0  # weight of the nominal models' slowest mode against the family's violations
 MAX_ITER = 300
+NOMINAL_DECAY_WEIGHT = 1e5  # weight of the nominal models' modes slower than design.robust_nominal_decay
 SCALE_BOUNDS = (-0.95, 5.0)  # each gain entry may move to 0.05x .. 6x its LQG value
 
 
@@ -111,29 +113,39 @@ def radii(members: list[Member], Ao, Bo, Co, K, L) -> np.ndarray:
 
 
 def radius_gradient(mb: Member, Ao, Bo, Co, K, L) -> tuple[float, np.ndarray, np.ndarray]:
-    """Spectral radius of one member's loop and its gradient with respect to every entry of K and L.
+    """Spectral radius of one member's loop and its gradient with respect to every entry of K and L."""
+    return eigen_gradients(mb, Ao, Bo, Co, K, L, floor=None)[0]
 
-    First-order eigenvalue perturbation: with lambda the eigenvalue of largest modulus, x its right
-    and y its left eigenvector, d lambda = y^H dM x / y^H x, and every dM here is rank one (a row of
-    K or a column of L), so the whole gradient costs one eigendecomposition."""
+
+def eigen_gradients(mb: Member, Ao, Bo, Co, K, L, floor: float | None) -> list[tuple[float, np.ndarray, np.ndarray]]:
+    """(|lambda|, d|lambda|/dK, d|lambda|/dL) for the eigenvalue of largest modulus (floor None) or for
+    every eigenvalue with |lambda| > floor.
+
+    First-order eigenvalue perturbation: with lambda an eigenvalue, x its right and y its left
+    eigenvector, d lambda = y^H dM x / y^H x, and every dM here is rank one (a row of K or a column
+    of L), so the whole gradient costs one eigendecomposition."""
     M = loop_matrix(mb, Ao, Bo, Co, K, L)
     w, vl, vr = sla.eig(M, left=True, right=True)
-    k = int(np.argmax(np.abs(w)))
-    lam, xr, yH = w[k], vr[:, k], vl[:, k].conj()
-    denom = yH @ xr
+    ks = [int(np.argmax(np.abs(w)))] if floor is None else [k for k in np.flatnonzero(np.abs(w) > floor)
+                                                               if w[k].imag >= 0.0]
     npl, no = mb.Ad.shape[0], Ao.shape[0]
-    a, b, c, e = xr[:npl], xr[npl:npl + no], yH[:npl], yH[npl:npl + no]
     g, CBd = mb.gain, float((mb.C @ mb.Bd)[0, 0])
     obs_in = (np.eye(no) - L @ Co) @ Bo[:, 0]  # how a change of the command enters the estimate
-    drift = (mb.C @ mb.Ad @ a)[0] - (Co @ (Ao - Bo @ K) @ b)[0]
-    if mb.delay == 0:
-        sK = c @ (-g * mb.Bd[:, 0]) - e @ obs_in - g * CBd * (e @ L[:, 0])
-        tL = drift - g * CBd * (K @ b)[0]
-    else:  # the command enters the plant through the delay line; its first slot is -K xhat
-        sK = -yH[npl + no] - e @ obs_in
-        tL = drift + g * CBd * xr[-1]
-    f = np.conj(lam) / abs(lam)
-    return float(abs(lam)), np.real(f * sK * b / denom), np.real(f * e * tL / denom)
+    out = []
+    for k in ks:
+        lam, xr, yH = w[k], vr[:, k], vl[:, k].conj()
+        denom = yH @ xr
+        a, b, c, e = xr[:npl], xr[npl:npl + no], yH[:npl], yH[npl:npl + no]
+        drift = (mb.C @ mb.Ad @ a)[0] - (Co @ (Ao - Bo @ K) @ b)[0]
+        if mb.delay == 0:
+            sK = c @ (-g * mb.Bd[:, 0]) - e @ obs_in - g * CBd * (e @ L[:, 0])
+            tL = drift - g * CBd * (K @ b)[0]
+        else:  # the command enters the plant through the delay line; its first slot is -K xhat
+            sK = -yH[npl + no] - e @ obs_in
+            tL = drift + g * CBd * xr[-1]
+        f = np.conj(lam) / abs(lam)
+        out.append((float(abs(lam)), np.real(f * sK * b / denom), np.real(f * e * tL / denom)))
+    return out
 
 
 @dataclass
@@ -164,6 +176,8 @@ def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refi
     appended, Ko = [K, 1] and Lo = [L; Lw]; else Ko = K, Lo = L and Lw stays 0."""
     members = family(p, dt)
     target = p["design"]["robust_radius"]
+    decay = p["design"]["robust_nominal_decay"]
+    nominal_floor = math.exp(-decay * dt) if decay > 0 else None
     nominal = np.array([mb.nominal for mb in members])
     nK, nL = Ko.shape[1] - (1 if disturbance else 0), Lo.shape[0]  # the disturbance's unit gain in K stays 1
 
@@ -184,8 +198,16 @@ def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refi
         weight[inom] += NOMINAL_WEIGHT
         dK = sum(wt * o[1] for wt, o in zip(weight, out) if wt)
         dL = sum(wt * o[2] for wt, o in zip(weight, out) if wt)
+        J = NOMINAL_WEIGHT * r[inom] + 5e4 * np.sum(v**2) + 10.0 * np.sum(v) + 1e-4 * np.sum(x**2)
+        if nominal_floor is not None:
+            for mb in members:
+                if mb.nominal:
+                    for mag, gK, gL in eigen_gradients(mb, Ao, Bo, Co, K, L, nominal_floor):
+                        J += NOMINAL_DECAY_WEIGHT * (mag - nominal_floor) ** 2
+                        dK = dK + 2 * NOMINAL_DECAY_WEIGHT * (mag - nominal_floor) * gK
+                        dL = dL + 2 * NOMINAL_DECAY_WEIGHT * (mag - nominal_floor) * gL
         grad = np.concatenate([dK[:nK] * Ko[0, :nK], dL * Lo[:, 0]]) + 2e-4 * x
-        return NOMINAL_WEIGHT * r[inom] + 5e4 * np.sum(v**2) + 10.0 * np.sum(v) + 1e-4 * np.sum(x**2), grad
+        return J, grad
 
     x0 = np.zeros(nK + nL)
     res = minimize(cost, x0, jac=True, method="L-BFGS-B", bounds=[SCALE_BOUNDS] * len(x0),

@@ -83,8 +83,9 @@ SPACE: tuple[Dim, ...] = (
     # searched only for design.method = "robust" (they change nothing otherwise)
     Dim("design.robust_radius", 0.999, 0.99995, why="spectral radius the model family must stay below [-]"),
     Dim("design.robust_gain_margin", 0.1, 0.8, log=True, why="torque fraction the loop must hold [-]"),
+    Dim("design.robust_nominal_decay", 0.0, 5.0, why="every nominal mode decays at least this fast [1/s]"),
 )
-ROBUST_ONLY = ("design.robust_radius", "design.robust_gain_margin")
+ROBUST_ONLY = ("design.robust_radius", "design.robust_gain_margin", "design.robust_nominal_decay")
 
 
 def space(only: str | None = None, params: Params | None = None) -> tuple[Dim, ...]:
