@@ -114,25 +114,28 @@ def radii(members: list[Member], Ao, Bo, Co, K, L) -> np.ndarray:
 
 def radius_gradient(mb: Member, Ao, Bo, Co, K, L) -> tuple[float, np.ndarray, np.ndarray]:
     """Spectral radius of one member's loop and its gradient with respect to every entry of K and L."""
-    return eigen_gradients(mb, Ao, Bo, Co, K, L, floor=None)[0]
+    return eigen_gradients(mb, Ao, Bo, Co, K, L)[0]
 
 
-def eigen_gradients(mb: Member, Ao, Bo, Co, K, L, floor: float | None) -> list[tuple[float, np.ndarray, np.ndarray]]:
-    """(|lambda|, d|lambda|/dK, d|lambda|/dL) for the eigenvalue of largest modulus (floor None) or for
-    every eigenvalue with |lambda| > floor.
+Gradient = tuple[float, np.ndarray, np.ndarray]  # (|lambda|, d|lambda|/dK, d|lambda|/dL)
+
+
+def eigen_gradients(mb: Member, Ao, Bo, Co, K, L, floor: float | None = None) -> tuple[Gradient, list[Gradient]]:
+    """The eigenvalue of largest modulus, and (floor given) every eigenvalue with |lambda| > floor (one
+    of each conjugate pair), each as (|lambda|, d|lambda|/dK, d|lambda|/dL), from one decomposition.
 
     First-order eigenvalue perturbation: with lambda an eigenvalue, x its right and y its left
     eigenvector, d lambda = y^H dM x / y^H x, and every dM here is rank one (a row of K or a column
     of L), so the whole gradient costs one eigendecomposition."""
     M = loop_matrix(mb, Ao, Bo, Co, K, L)
     w, vl, vr = sla.eig(M, left=True, right=True)
-    ks = [int(np.argmax(np.abs(w)))] if floor is None else [k for k in np.flatnonzero(np.abs(w) > floor)
-                                                               if w[k].imag >= 0.0]
+    top = int(np.argmax(np.abs(w)))
+    slow = [] if floor is None else [int(k) for k in np.flatnonzero(np.abs(w) > floor) if w[k].imag >= 0.0]
     npl, no = mb.Ad.shape[0], Ao.shape[0]
     g, CBd = mb.gain, float((mb.C @ mb.Bd)[0, 0])
     obs_in = (np.eye(no) - L @ Co) @ Bo[:, 0]  # how a change of the command enters the estimate
-    out = []
-    for k in ks:
+
+    def gradient(k: int) -> Gradient:
         lam, xr, yH = w[k], vr[:, k], vl[:, k].conj()
         denom = yH @ xr
         a, b, c, e = xr[:npl], xr[npl:npl + no], yH[:npl], yH[npl:npl + no]
@@ -144,8 +147,10 @@ def eigen_gradients(mb: Member, Ao, Bo, Co, K, L, floor: float | None) -> list[t
             sK = -yH[npl + no] - e @ obs_in
             tL = drift + g * CBd * xr[-1]
         f = np.conj(lam) / abs(lam)
-        out.append((float(abs(lam)), np.real(f * sK * b / denom), np.real(f * e * tL / denom)))
-    return out
+        return float(abs(lam)), np.real(f * sK * b / denom), np.real(f * e * tL / denom)
+
+    got = {k: gradient(k) for k in {top, *slow}}
+    return got[top], [got[k] for k in slow]
 
 
 @dataclass
@@ -188,9 +193,10 @@ def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refi
         return K, L
 
     def cost(x):
-        """The penalty and its gradient in x (analytic: radius_gradient)."""
+        """The penalty and its gradient in x (analytic: eigen_gradients)."""
         K, L = gains(x)
-        out = [radius_gradient(mb, Ao, Bo, Co, K, L) for mb in members]
+        out, slow = zip(*(eigen_gradients(mb, Ao, Bo, Co, K, L, nominal_floor if mb.nominal else None)
+                          for mb in members))
         r = np.array([o[0] for o in out])
         v = np.maximum(r - target, 0.0)
         inom = int(np.flatnonzero(nominal)[np.argmax(r[nominal])])
@@ -199,13 +205,10 @@ def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refi
         dK = sum(wt * o[1] for wt, o in zip(weight, out) if wt)
         dL = sum(wt * o[2] for wt, o in zip(weight, out) if wt)
         J = NOMINAL_WEIGHT * r[inom] + 5e4 * np.sum(v**2) + 10.0 * np.sum(v) + 1e-4 * np.sum(x**2)
-        if nominal_floor is not None:
-            for mb in members:
-                if mb.nominal:
-                    for mag, gK, gL in eigen_gradients(mb, Ao, Bo, Co, K, L, nominal_floor):
-                        J += NOMINAL_DECAY_WEIGHT * (mag - nominal_floor) ** 2
-                        dK = dK + 2 * NOMINAL_DECAY_WEIGHT * (mag - nominal_floor) * gK
-                        dL = dL + 2 * NOMINAL_DECAY_WEIGHT * (mag - nominal_floor) * gL
+        for mag, gK, gL in (e for modes in slow for e in modes):  # empty unless robust_nominal_decay > 0
+            J += NOMINAL_DECAY_WEIGHT * (mag - nominal_floor) ** 2
+            dK = dK + 2 * NOMINAL_DECAY_WEIGHT * (mag - nominal_floor) * gK
+            dL = dL + 2 * NOMINAL_DECAY_WEIGHT * (mag - nominal_floor) * gL
         grad = np.concatenate([dK[:nK] * Ko[0, :nK], dL * Lo[:, 0]]) + 2e-4 * x
         return J, grad
 

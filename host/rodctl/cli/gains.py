@@ -61,8 +61,6 @@ def generated_files(args) -> tuple[object, dict[Path, str]]:
 
     p = params_from_args(args)
     if p["design"]["method"] == "robust":  # seconds, not milliseconds: say so before the wait
-        import sys
-
         print("rodctl: refining the gains on the robust model family (design.method = robust; a few seconds)",
               file=sys.stderr, flush=True)
     d = design(p)

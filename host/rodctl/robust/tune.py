@@ -85,7 +85,7 @@ SPACE: tuple[Dim, ...] = (
     Dim("design.robust_gain_margin", 0.1, 0.8, log=True, why="torque fraction the loop must hold [-]"),
     Dim("design.robust_nominal_decay", 0.0, 5.0, why="every nominal mode decays at least this fast [1/s]"),
 )
-ROBUST_ONLY = ("design.robust_radius", "design.robust_gain_margin", "design.robust_nominal_decay")
+ROBUST_ONLY = tuple(d.name for d in SPACE if d.name.startswith("design.robust_"))
 
 
 def space(only: str | None = None, params: Params | None = None) -> tuple[Dim, ...]:
