@@ -353,15 +353,21 @@ def test_ctrl_c_keeps_finished_trials_and_the_study_resumes(tmp_path):
     study, out = tmp_path / "study", tmp_path / "tuned.toml"
     argv = [sys.executable, "-m", "rodctl.cli", "tune", "--cases", "nominal", "--samples", "0", "--seconds", "0.5",
             "--only", "lqr.q_angle", "--jobs", "1", "--study", str(study), "--out", str(out)]
+    # PYTHONFAULTHANDLER: if it hangs after Ctrl-C, SIGABRT makes it print where every thread is
     p = subprocess.Popen(argv + ["--budget", "1000"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                         start_new_session=True)
+                         start_new_session=True, env={**os.environ, "PYTHONFAULTHANDLER": "1"})
     try:
         deadline = time.monotonic() + 180
         while _finished_trials(study) < 2:
             assert p.poll() is None and time.monotonic() < deadline
             time.sleep(0.5)
         os.killpg(p.pid, signal.SIGINT)  # what Ctrl-C sends: the whole process group
-        _, err = p.communicate(timeout=120)
+        try:
+            _, err = p.communicate(timeout=120)
+        except subprocess.TimeoutExpired:
+            os.kill(p.pid, signal.SIGABRT)
+            _, err = p.communicate(timeout=60)
+            pytest.fail("rodctl tune still ran 120 s after Ctrl-C; its threads then:\n" + err[-6000:])
     finally:
         if p.poll() is None:
             os.killpg(p.pid, signal.SIGKILL)
