@@ -163,3 +163,60 @@ def test_analytic_radius_gradient_matches_finite_differences(lqg):
             L2[i, 0] += h
             fd = (R.radii([mb], Ao, Bo, Co, Ko, L2)[0] - r) / h
             assert gL[i] == pytest.approx(fd, rel=1e-3, abs=1e-6), (mb.name, "L", i)
+
+
+# A stiffer rig (hidden rig A of tests/test_identify.py): E 650 kPa, rotor 6e-7 kg m^2, friction and
+# k_t off Table I. Redesigned for it, the refined gains of robust-matrix.toml are linearly stable on
+# every model of the family and still bang the rod over from 30 deg: the large-signal guard's reason.
+STIFF_RIG = ("rod.youngs_modulus=650000.0", "rod.damping=0.0013", "motor.rotor_inertia=6e-07",
+             "motor.viscous_friction=0.0007", "motor.coulomb_friction=0.004",
+             "motor.torque_constant=0.0117915", "motor.back_emf_constant=0.0117915")
+
+
+@pytest.fixture(scope="module")
+def stiff_guarded():
+    return design(load_params(MATRIX_FILE, list(STIFF_RIG)))
+
+
+def test_fast_rhs_is_the_rod_model():
+    import numpy as np
+
+    from rodgains import large_signal
+    from rodgains.rod_model import RodModel
+
+    rod = RodModel.from_params(load_params(MATRIX_FILE)).kelvin_voigt()
+    q = rod.upright + np.random.default_rng(3).normal(0.0, 0.5, 2 * rod.N)
+    assert np.allclose(large_signal.fast_rhs(rod)(q, 0.07), rod.f(q, 0.07), rtol=1e-12, atol=1e-9)
+
+
+def test_unguarded_refinement_falls_from_the_catch_angle_on_a_stiffer_rig(stiff_guarded, monkeypatch):
+    from rodgains import large_signal, robust_design
+
+    p = stiff_guarded.params
+    monkeypatch.setattr(robust_design, "BACKTRACK", (1.0,))
+    monkeypatch.setattr(robust_design, "_MEMO", {})
+    raw = design(p)
+    # every member of the family linearly stable, yet released from 30 deg it falls within 0.5 s
+    assert max(raw.checks["robust_family_radii"].values()) < 1.0
+    got = large_signal.release(p, raw.dt, *raw.estimator())
+    assert got["fell"] and got["fell_at_s"] < 0.5
+    # the guard walked back toward LQG and kept 60 % of the refinement
+    assert stiff_guarded.checks["robust_step"] == pytest.approx(0.6)
+    assert stiff_guarded.checks["robust_release"]["holds"]
+    assert stiff_guarded.checks["robust_release"]["runs"]["nominal"]["final_deg"] < 1.0
+
+
+@pytest.mark.parametrize("task", ["balance", "swingup"])
+def test_guarded_design_holds_the_stiffer_rig_in_the_firmware(stiff_guarded, task):
+    """On the faithful plant of that rig: the unguarded gains hit the angle limit (FAULT) in both tasks."""
+    p = stiff_guarded.params
+    r = matrix.run_case(p, matrix.CASES["nominal"], task)
+    assert r["fault_reason"] == 0 and r["final_dev_deg"] < 1.0, r
+
+
+def test_guard_keeps_the_whole_refinement_on_table_i():
+    d = design(load_params(MATRIX_FILE))
+    assert d.checks["robust_step"] == 1.0
+    runs = d.checks["robust_release"]["runs"]
+    assert list(runs) == ["nominal", "torque low, delayed, heavy rotor", "light rotor", "rod damping low"]
+    assert not any(r["fell"] for r in runs.values()) and runs["nominal"]["final_deg"] < 1.0

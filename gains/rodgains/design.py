@@ -238,6 +238,8 @@ def design(p: Params) -> Design:
         d.K, d.L, d.Lw = ref.K, ref.L, ref.Lw
         checks["robust_family_radii"] = ref.radii
         checks["robust_family_radii_lqg"] = ref.radii_lqg
+        checks["robust_step"] = ref.step
+        checks["robust_release"] = ref.release
     rho = sampled.spectral_radius(d.loop())
     checks["closed_loop_spectral_radius"] = rho
     if not np.all(np.isfinite(d.K)) or not np.all(np.isfinite(d.L)):

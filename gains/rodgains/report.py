@@ -111,6 +111,15 @@ def report_text(d: Design) -> str:
                       f"LQG -> refined (target {target:g}):"]
         lines += [f"  {name:28s} {lqg[name]:.5f} -> {r:.5f}" + ("  <- above target" if r > target + 1e-6 else "")
                   for name, r in fam.items()]
+        guard = d.checks.get("robust_release")
+        if guard:
+            start = d.params["swing_up"]["catch_angle_deg"]
+            lines += [f"Large-signal guard (design model released from {start:g} deg, torque limit, encoder; "
+                      f"large_signal.py): kept {d.checks['robust_step']:.0%} of the refinement"
+                      + ("" if guard["holds"] else " (none holds: the LQG gains)")]
+            lines += [f"  {name:34s} " + (f"FELL at {g['fell_at_s']:.2f} s" if g["fell"] else
+                                          f"within {g['final_deg']:.2f} deg at the end")
+                      for name, g in guard["runs"].items()]
     return "\n".join(lines) + "\n"
 
 

@@ -11,11 +11,15 @@ Departures from the printed paper (see physics-notes.md):
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
 from .params import Params
+
+
+DAMPING_REFERENCE_EDGES = 5  # rod.damping is the joint damping of Table I's N = 5 rod (Kelvin-Voigt)
 
 
 @dataclass(frozen=True)
@@ -45,6 +49,11 @@ class RodModel:
             J=p.design_base_inertia if design else p.base_inertia,
             b=p.design_base_friction if design else p.base_friction,
         )
+
+    def kelvin_voigt(self) -> "RodModel":
+        """The same rod with its joint damping scaled as a continuum's (Kelvin-Voigt): Table I's
+        5-edge value x N / 5, as the family of the robust design and the simulated plant use it."""
+        return dataclasses.replace(self, d=self.d * self.N / DAMPING_REFERENCE_EDGES)
 
     # --- constant structure ---------------------------------------------------------
     @property

@@ -104,7 +104,7 @@ KNOWN_FAILURES: dict[tuple[str, str], str] = {
     ("damping*10", "balance"): "a rod 10x more damped than the design's observer model: a 3.4 Hz bending oscillation "
                                "grows (linearly unstable: spectral radius 1.0039) and the angle limit trips; "
                                "docs/tuned/robust-matrix.toml (design.method = robust) holds it and meets the nominal "
-                               "goals on this rod, but redesigned for another rod it can fall (README)",
+                               "goals on this rod (README, Robust design)",
     ("damping*10", "swingup"): "caught at 0.96 s, then the same instability as balance",
 }
 CASE_SETS: dict[str, tuple[str, ...]] = {
