@@ -45,7 +45,7 @@ import numpy as np
 from rodgains.errors import UserError
 from rodgains.der_model import DERModel
 from rodgains.params import Params, load_params
-from rodgains.rod_model import RodModel
+from rodgains.rod_model import DAMPING_REFERENCE_EDGES, RodModel
 
 from rodctl.build.native import compile_shared
 
@@ -570,9 +570,6 @@ def choose_integrator(plant: Plant, method: str = "auto", period: float = 1e-3) 
         method = "rk4" if n_rk4 <= n_ros2 else "ros2"
     return {"method": method, "step": h_rk4 if method == "rk4" else h_ros2, "omega_osc": w_osc, "rho": rho,
             "steps_per_period": {"ros2": n_ros2, "rk4": n_rk4}}
-
-
-DAMPING_REFERENCE_EDGES = 5  # rod.damping is the joint damping of Table I's N = 5 rod
 
 
 def hub_geometry(p: Params, edges: int, hub_length: float, d: float | None = None) -> dict[str, float]:
