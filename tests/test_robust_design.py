@@ -178,17 +178,6 @@ def stiff_guarded():
     return design(load_params(MATRIX_FILE, list(STIFF_RIG)))
 
 
-def test_fast_rhs_is_the_rod_model():
-    import numpy as np
-
-    from rodgains import large_signal
-    from rodgains.rod_model import RodModel
-
-    rod = RodModel.from_params(load_params(MATRIX_FILE)).kelvin_voigt()
-    q = rod.upright + np.random.default_rng(3).normal(0.0, 0.5, 2 * rod.N)
-    assert np.allclose(large_signal.fast_rhs(rod)(q, 0.07), rod.f(q, 0.07), rtol=1e-12, atol=1e-9)
-
-
 def test_unguarded_refinement_falls_from_the_catch_angle_on_a_stiffer_rig(stiff_guarded, monkeypatch):
     from rodgains import large_signal, robust_design
 

@@ -49,7 +49,7 @@ def release(p: Params, dt: float, Ao, Bo, Co, K, L, start_deg: float | None = No
     K, L, Co = np.asarray(K)[0], np.asarray(L)[:, 0], np.asarray(Co)[0]
     Bo = np.asarray(Bo)[:, 0]
 
-    f = fast_rhs(rod)
+    f = rod.f
     q = rod.upright.copy()
     q[:N] += start
     z = np.zeros(Ao.shape[0])
@@ -104,33 +104,6 @@ def guard(p: Params, dt: float, Ao, Bo, Co, K, L) -> dict:
         if got["fell"] or (settle and not got["holds"]):
             return {"holds": False, "runs": runs}
     return {"holds": True, "runs": runs}
-
-
-def fast_rhs(rod: RodModel):
-    """RodModel.f (eq. 13) with its constant matrices built once: the same dynamics, several times
-    faster in this loop (tests/test_robust_design.py compares the two)."""
-    N = rod.N
-    ml2 = rod.m * rod.l**2
-    S = ml2 * rod.staircase
-    D = rod.d * rod.laplacian
-    grav = rod.m * rod.g * rod.l * rod.mass_below
-    spring = 2.0 * rod.EI / rod.l
-    J, b = rod.J, rod.b
-
-    def f(q: np.ndarray, torque: float) -> np.ndarray:
-        th, dth = q[:N], q[N:]
-        rel = np.subtract.outer(th, th)
-        M = np.cos(rel) * S
-        M[0, 0] += J
-        half = 0.5 * np.diff(th)
-        dEb = spring * np.tan(half) / np.cos(half) ** 2
-        rhs = -((np.sin(rel) * S) @ (dth * dth)) - grav * np.sin(th) - D @ dth
-        rhs[:-1] += dEb
-        rhs[1:] -= dEb
-        rhs[0] += torque - b * dth[0]
-        return np.concatenate([dth, np.linalg.solve(M, rhs)])
-
-    return f
 
 
 def _stiffest_rate(rod: RodModel) -> float:

@@ -224,7 +224,6 @@ def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refi
     x = res.x if cost(res.x)[0] <= cost(x0)[0] else x0
     # The eigenvalues see small motions only: walk back toward the LQG gains until the design model
     # released from the catch angle, saturated and quantized, holds (large_signal.py).
-    step, release = 0.0, None
     for step in BACKTRACK:
         K, L = gains(step * x)
         release = large_signal.guard(p, dt, Ao, Bo, Co, K, L)

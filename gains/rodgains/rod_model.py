@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -20,6 +21,12 @@ from .params import Params
 
 
 DAMPING_REFERENCE_EDGES = 5  # rod.damping is the joint damping of Table I's N = 5 rod (Kelvin-Voigt)
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """A cached array no caller can change in place."""
+    a.setflags(write=False)
+    return a
 
 
 @dataclass(frozen=True)
@@ -55,26 +62,26 @@ class RodModel:
         5-edge value x N / 5, as the family of the robust design and the simulated plant use it."""
         return dataclasses.replace(self, d=self.d * self.N / DAMPING_REFERENCE_EDGES)
 
-    # --- constant structure ---------------------------------------------------------
-    @property
+    # --- constant structure (computed once per rod: f() runs thousands of times a simulation) ---
+    @cached_property
     def mass_below(self) -> np.ndarray:
         """c_i = N + 1/2 - i: mass beyond node i-1 in units of m (node masses m/2, m, ..., m, m/2)."""
-        return self.N + 0.5 - np.arange(1, self.N + 1)
+        return _read_only(self.N + 0.5 - np.arange(1, self.N + 1))
 
-    @property
+    @cached_property
     def staircase(self) -> np.ndarray:
         """S_ij = c_max(i,j): M(theta) / (m l^2) at cos(theta_i - theta_j) = 1."""
         c = self.mass_below
         idx = np.arange(self.N)
-        return c[np.maximum.outer(idx, idx)]
+        return _read_only(c[np.maximum.outer(idx, idx)])
 
-    @property
+    @cached_property
     def laplacian(self) -> np.ndarray:
         """Path-graph Laplacian: the pattern of D in eq. (11) and of the linearized bending springs."""
         N = self.N
         Lp = 2.0 * np.eye(N) - np.eye(N, k=1) - np.eye(N, k=-1)
         Lp[0, 0] = Lp[-1, -1] = 1.0
-        return Lp
+        return _read_only(Lp)
 
     # --- eqs. (8)-(12) ------------------------------------------------------------------
     def mass_matrix(self, theta: np.ndarray) -> np.ndarray:
