@@ -209,3 +209,32 @@ def test_guard_keeps_the_whole_refinement_on_table_i():
     runs = d.checks["robust_release"]["runs"]
     assert list(runs) == ["nominal", "torque low, delayed, heavy rotor", "light rotor", "rod damping low"]
     assert not any(r["fell"] for r in runs.values()) and runs["nominal"]["final_deg"] < 1.0
+
+
+def test_report_warns_of_the_ringing_mode_the_firmware_then_buzzes_at():
+    """`rodctl gains --report` flags a loop mode damped below 0.1; in the SIL on the faithful plant
+    the balanced rod's torque then ripples at that frequency, three times the default's ripple."""
+    import numpy as np
+
+    from rodgains.report import least_damped_mode, report_text
+
+    robust = design(load_params(MATRIX_FILE))
+    hz, zeta = least_damped_mode(robust)
+    assert zeta < 0.1 and 50.0 < hz < 75.0
+    assert f"WARNING: below 0.1, encoder quantization keeps it ringing (expect torque ripple at {hz:.3g} Hz" \
+        in report_text(robust)
+    default_hz, default_zeta = least_damped_mode(design(load_params()))
+    assert default_zeta > 0.2
+
+    def ripple(p):
+        r = matrix.run_case(p, matrix.CASES["nominal"], "balance", keep_log=True, seconds=6.0)
+        log = r["log"]
+        u = log["torque"][log["time"] > 4.0]
+        spectrum = np.abs(np.fft.rfft(u - u.mean()))
+        return float(np.sqrt(np.mean(u**2))), float(np.fft.rfftfreq(u.size, log["time"][1] - log["time"][0])[
+            np.argmax(spectrum)])
+
+    rms, peak_hz = ripple(load_params(MATRIX_FILE))
+    default_rms, _ = ripple(load_params())
+    assert peak_hz == pytest.approx(hz, rel=0.1)
+    assert rms > 0.04 and rms > 3 * default_rms  # N m RMS

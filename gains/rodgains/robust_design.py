@@ -39,7 +39,7 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.optimize import minimize
 
-from . import large_signal, sampled
+from . import design_cache, large_signal, sampled
 from .linearize import linearize_upright
 from .params import Params
 from .rod_model import RodModel
@@ -169,16 +169,38 @@ class Refined:
     release: dict | None = None  # large_signal.guard() of the gains kept
 
 
-# parameters hash -> Refined: the refinement takes seconds, and a process (a test session, a
-# worker building one SIL library after another) asks for the same design more than once
+# cache key -> Refined: the refinement takes seconds, and a process (a test session, a worker
+# building one SIL library after another) asks for the same design more than once; across
+# processes, design_cache keeps it on disk
 _MEMO: dict[str, Refined] = {}
 
 
 def refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refined:
-    key = p.sha256()
+    key = design_cache.key(p.sha256(), (dt, disturbance), (Ao, Bo, Co, Ko, Lo))
     if key not in _MEMO:
-        _MEMO[key] = _refine(p, dt, Ao, Bo, Co, Ko, Lo, disturbance)
+        record = design_cache.load(key)
+        if record is not None:
+            try:
+                _MEMO[key] = _from_record(record)
+            except (KeyError, TypeError, ValueError):
+                record = None
+        if record is None:
+            _MEMO[key] = _refine(p, dt, Ao, Bo, Co, Ko, Lo, disturbance)
+            design_cache.store(key, _to_record(_MEMO[key]))
     return _MEMO[key]
+
+
+def _to_record(r: Refined) -> dict:
+    return {"K": r.K.tolist(), "L": r.L.tolist(), "Lw": r.Lw, "radii": r.radii, "radii_lqg": r.radii_lqg,
+            "iterations": r.iterations, "step": r.step, "release": r.release}
+
+
+def _from_record(d: dict) -> Refined:
+    K, L = np.array(d["K"], dtype=float), np.array(d["L"], dtype=float)
+    if K.ndim != 2 or K.shape[0] != 1 or L.shape != (K.shape[1], 1):
+        raise ValueError("cached gains have the wrong shape")
+    return Refined(K, L, float(d["Lw"]), dict(d["radii"]), dict(d["radii_lqg"]), int(d["iterations"]),
+                   float(d["step"]), d["release"])
 
 
 def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refined:

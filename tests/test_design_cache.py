@@ -1,0 +1,117 @@
+"""The robust refinement's on-disk cache (gains/rodgains/design_cache.py).
+
+What a user notices: the second `rodctl` command that needs a robust design starts in a fraction
+of a second instead of about 6 s, with the very same gains; a changed parameter is designed anew;
+a broken or read-only cache never stops a design. The refinement itself is faked here (its result
+is what the cache must carry, not how it is computed; tests/test_robust_design.py runs it).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from rodgains import design_cache
+from rodgains import robust_design as R
+from rodgains.design import design
+from rodgains.params import load_params
+from rodctl import paths
+
+MATRIX_FILE = paths.REPO / "docs/tuned/robust-matrix.toml"
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    """An empty cache folder, no in-process memo, and a refinement that records its calls."""
+    folder = tmp_path / "designs"
+    monkeypatch.setenv("RODGAINS_CACHE_DIR", str(folder))
+    monkeypatch.setattr(R, "_MEMO", {})
+    calls = []
+    rng = np.random.default_rng(7)
+
+    def fake_refine(p, dt, Ao, Bo, Co, Ko, Lo, disturbance):
+        calls.append(p.sha256())
+        n = Ko.shape[1] - 1
+        scale = 1.0 + 0.01 * rng.standard_normal(n)  # full float64 mantissas, as a real refinement gives
+        return R.Refined(Ko[:, :n] * scale, Lo[:n] * 1.0, float(Lo[n, 0]) / 3.0, {"N=8 damping x1": 0.99712345678},
+                         {"N=8 damping x1": 0.998}, 17, 0.8,
+                         {"holds": True, "runs": {"nominal": {"fell": False, "fell_at_s": None,
+                                                              "final_deg": 0.123456789, "holds": True}}})
+
+    monkeypatch.setattr(R, "_refine", fake_refine)
+    return folder, calls
+
+
+def _gains(d):
+    return d.K.copy(), d.L.copy(), d.Lw
+
+
+def test_a_second_process_gets_the_same_gains_without_refining(cache, monkeypatch):
+    folder, calls = cache
+    p = load_params(MATRIX_FILE)
+    K1, L1, Lw1 = _gains(design(p))
+    assert len(calls) == 1
+    assert len(list(folder.glob("*.json"))) == 1
+    monkeypatch.setattr(R, "_MEMO", {})  # as a new process would start
+    d = design(p)
+    K2, L2, Lw2 = _gains(d)
+    assert len(calls) == 1  # served from disk
+    assert np.array_equal(K1, K2) and np.array_equal(L1, L2) and Lw1 == Lw2  # bit-identical
+    assert d.checks["robust_step"] == 0.8
+    assert d.checks["robust_release"]["runs"]["nominal"]["final_deg"] == 0.123456789
+    assert not list(folder.glob("*.tmp"))  # no half-written file left behind
+
+
+def test_a_changed_parameter_is_designed_anew(cache):
+    folder, calls = cache
+    design(load_params(MATRIX_FILE))
+    design(load_params(MATRIX_FILE, ["design.robust_radius=0.9997"]))
+    assert len(calls) == 2
+    assert len(list(folder.glob("*.json"))) == 2
+
+
+def test_a_change_of_the_design_code_is_designed_anew(cache, monkeypatch):
+    folder, calls = cache
+    p = load_params(MATRIX_FILE)
+    design(p)
+    monkeypatch.setattr(R, "_MEMO", {})
+    monkeypatch.setattr(design_cache, "code_hash", lambda: "another version of rodgains")
+    design(p)
+    assert len(calls) == 2
+
+
+@pytest.mark.parametrize("damage", ["not json", "another key", "wrong shape"])
+def test_a_corrupt_entry_is_designed_anew_and_replaced(cache, monkeypatch, damage):
+    folder, calls = cache
+    p = load_params(MATRIX_FILE)
+    K1, _, _ = _gains(design(p))
+    (entry,) = folder.glob("*.json")
+    entry.write_text({"not json": "{ half a record",
+                      "another key": json.dumps(dict(json.loads(entry.read_text()), key="0" * 64)),
+                      "wrong shape": json.dumps({"key": entry.stem, "K": [[1.0, 2.0]], "L": [[1.0]], "Lw": 0.0,
+                                                 "radii": {}, "radii_lqg": {}, "iterations": 1, "step": 1.0,
+                                                 "release": None})}[damage])
+    monkeypatch.setattr(R, "_MEMO", {})
+    K2, _, _ = _gains(design(p))
+    assert len(calls) == 2
+    assert np.all(np.isfinite(K2)) and K2.shape == K1.shape
+    assert json.loads(entry.read_text())["key"] == entry.stem  # rewritten whole
+
+
+def test_an_unwritable_cache_still_designs(cache, tmp_path, monkeypatch):
+    _, calls = cache
+    blocker = tmp_path / "a file, not a folder"
+    blocker.write_text("")
+    monkeypatch.setenv("RODGAINS_CACHE_DIR", str(blocker / "designs"))
+    d = design(load_params(MATRIX_FILE))
+    assert len(calls) == 1 and d.checks["closed_loop_spectral_radius"] < 1.0
+
+
+def test_the_cache_folder_follows_the_environment(monkeypatch, tmp_path):
+    monkeypatch.delenv("RODGAINS_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert design_cache.directory() == tmp_path / "xdg" / "rodgains"
+    monkeypatch.setenv("RODGAINS_CACHE_DIR", str(tmp_path / "mine"))
+    assert design_cache.directory() == tmp_path / "mine"
