@@ -176,7 +176,9 @@ _MEMO: dict[str, Refined] = {}
 
 
 def refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refined:
-    key = design_cache.key(p.sha256(), (dt, disturbance), (Ao, Bo, Co, Ko, Lo))
+    # the module's constants too: the source hash covers them as written, not as a caller (a test) sets them
+    settings = (dt, disturbance, NOMINAL_WEIGHT, MAX_ITER, NOMINAL_DECAY_WEIGHT, SCALE_BOUNDS, BACKTRACK)
+    key = design_cache.key(p.sha256(), settings, (Ao, Bo, Co, Ko, Lo))
     if key not in _MEMO:
         record = design_cache.load(key)
         if record is not None:
