@@ -32,11 +32,15 @@ PACKAGE = Path(__file__).resolve().parent
 FORMAT = 1  # bump when the stored layout changes
 
 
+def user_cache_home() -> Path:
+    """The user's cache folder by the XDG rule: $XDG_CACHE_HOME, else ~/.cache (rodctl's too)."""
+    return Path(os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"))
+
+
 def directory() -> Path:
     if os.environ.get("RODGAINS_CACHE_DIR"):
         return Path(os.environ["RODGAINS_CACHE_DIR"])
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "rodgains"
+    return user_cache_home() / "rodgains"
 
 
 @lru_cache(maxsize=1)

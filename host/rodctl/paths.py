@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from rodgains.design_cache import user_cache_home
 from rodgains.errors import InputError, UserError
 
 PACKAGE = Path(__file__).resolve().parent
@@ -25,8 +26,7 @@ def _is_clone(root: Path) -> bool:
 
 
 def _user_cache() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "rodctl"
+    return user_cache_home() / "rodctl"
 
 
 IN_CLONE = _is_clone(_CLONE)
