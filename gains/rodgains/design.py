@@ -29,6 +29,7 @@ def weights(p: Params, N: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
     """(Q, R) of the LQR cost (eq. 19) and (W, V) of the observer, continuous-time intensities."""
     lq, ob = p["lqr"], p["observer"]
     Q = np.diag([lq["q_angle"]] * N + [lq["q_rate"]] * N)
+    Q[0, 0] += lq["q_shaft_angle"]
     R = np.array([[lq["r_torque"]]])
     W = np.diag([ob["process_noise_angle"]] * N + [ob["process_noise_rate"]] * N)
     V = np.array([[ob["measurement_noise"]]])

@@ -105,10 +105,14 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "robust_gain_margin": Key(float, "-", _between(0.05, 1.0), default=0.3),
         # ... and every mode of the nominal models decays at least this fast (0: only the slowest is pushed)
         "robust_nominal_decay": Key(float, "1/s", _between(0.0, 50.0), default=0.0),
+        # ... and encoder quantization may drive at most this RMS torque in the nominal models (0: off)
+        "robust_noise_torque": Key(float, "N m", _between(0.0, 1.0), default=0.0),
     },
     "lqr": {
         "q_angle": Key(float, "1/rad^2", _nonneg),
         "q_rate": Key(float, "s^2/rad^2", _nonneg),
+        # added to q_angle on the shaft's own angle theta_1: a stiffer base (README "A stiffer shaft")
+        "q_shaft_angle": Key(float, "1/rad^2", _nonneg, default=0.0),
         "r_torque": Key(float, "1/(N m)^2", _positive),
         "friction_compensation": Key(float, "N m", _nonneg),
     },

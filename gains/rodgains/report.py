@@ -8,6 +8,7 @@ from . import sampled
 from .buckling import greenhill_length, nlink_critical_length
 from .design import Design, continuous_gains, weights
 from .linearize import linearize_upright
+from .robust_design import Member, noise_torque_rms, quantization_step
 from .rod_model import RodModel
 
 
@@ -70,6 +71,14 @@ def least_damped_mode(d: Design) -> tuple[float, float]:
     return float(abs(s[k].imag) / (2 * np.pi)), float(zeta[k])
 
 
+def quantization_torque(d: Design) -> float:
+    """RMS torque [N m] that encoder quantization (white, one count^2 / 12 per sample) drives through
+    the sampled loop on the design model: the linear part of the balanced torque ripple."""
+    Ao, Bo, Co, Ko, Lo = d.estimator()
+    return noise_torque_rms(Member("design", d.Ad, d.Bd, d.C, nominal=True), Ao, Bo, Co, Ko, Lo,
+                            quantization_step(d.params))
+
+
 def report_text(d: Design) -> str:
     p = d.params
     rod = d.rod
@@ -115,6 +124,7 @@ def report_text(d: Design) -> str:
         f"  least damped loop mode: {ring_hz:.3g} Hz, damping ratio {ring_zeta:.3f}"
         + (f"  <- WARNING: below {RINGING_DAMPING_RATIO:g}, encoder quantization keeps it ringing "
            f"(expect torque ripple at {ring_hz:.3g} Hz once balanced)" if ring_zeta < RINGING_DAMPING_RATIO else ""),
+        f"  encoder quantization drives {quantization_torque(d) * 1e3:.3g} mN m RMS of torque (linear, design model)",
         f"  modal controllability {d.checks['controllability']:.2e}, observability {d.checks['observability']:.2e}",
         "",
         f"The paper's continuous LQR (its weights, Sec. III) run sampled at {rate:g} Hz:",

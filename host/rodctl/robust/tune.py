@@ -73,6 +73,7 @@ SPACE: tuple[Dim, ...] = (
     Dim("observer.measurement_noise", 1e-6, 1e-3, log=True, why="[rad^2 s]"),
     Dim("observer.process_noise_torque", 1e-5, 1.0, log=True, why="disturbance-torque random walk [(N m)^2/s]"),
     Dim("lqr.friction_compensation", 0.0, 0.02, why="dry-friction feedforward [N m]"),
+    Dim("lqr.q_shaft_angle", 0.0, 1000.0, why="extra LQR weight on the shaft's angle [1/rad^2]"),
     # controller model order; the M4F step at N = 20 fits the 1 kHz budget (rodctl bench)
     Dim("rod.edges", choices=(3, 4, 5, 6, 8, 10, 12, 16, 20), why="controller model order [-]"),
     Dim("swing_up.amplitude", 0.02, 0.2, why="pump torque [N m], at most safety.torque_limit"),
@@ -84,6 +85,7 @@ SPACE: tuple[Dim, ...] = (
     Dim("design.robust_radius", 0.999, 0.99995, why="spectral radius the model family must stay below [-]"),
     Dim("design.robust_gain_margin", 0.1, 0.8, log=True, why="torque fraction the loop must hold [-]"),
     Dim("design.robust_nominal_decay", 0.0, 5.0, why="every nominal mode decays at least this fast [1/s]"),
+    Dim("design.robust_noise_torque", 0.0, 0.05, why="RMS torque encoder quantization may drive [N m]; 0: off"),
 )
 ROBUST_ONLY = tuple(d.name for d in SPACE if d.name.startswith("design.robust_"))
 
