@@ -291,7 +291,7 @@ def test_noise_torque_limit_removes_the_buzz_and_still_holds_ten_times_the_dampi
 
 @pytest.mark.parametrize("task", ["balance", "swingup"])
 def test_a_stiffer_shaft_holds_ten_times_the_damping_without_refinement(task):
-    """lqr.q_shaft_angle = 300 (docs/tuned/stiff-shaft.toml): the plain LQG design, no refinement, is
+    """lqr.q_shaft_angle = 300, q_angle = 10 (docs/tuned/stiff-shaft.toml): the plain LQG design, no refinement, is
     linearly stable on the faithful plant with ten times the rod damping (the default is not), and the
     firmware holds that rod in both tasks, where the default's drops it."""
     stiff = load_params(STIFF_FILE)
@@ -300,7 +300,7 @@ def test_a_stiffer_shaft_holds_ten_times_the_damping_without_refinement(task):
     for p, stable in ((stiff, True), (load_params(), False)):
         d = design(p)
         radius = linear_check.loop_radius(d, matrix.apply_overrides(p, damped.plant_overrides))
-        assert (radius < 0.9995) if stable else (radius > 1.003), (p.source, radius)
+        assert (radius < 0.9997) if stable else (radius > 1.003), (p.source, radius)  # 0.99959, 1.0039
     r = matrix.run_case(stiff, damped, task)
     assert r["passed"] and r["fault_reason"] == 0, r
     assert r["final_dev_deg"] < 1.0

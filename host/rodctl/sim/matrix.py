@@ -105,7 +105,7 @@ KNOWN_FAILURES: dict[tuple[str, str], str] = {
                                "grows (linearly unstable: spectral radius 1.0039) and the angle limit trips; "
                                "docs/tuned/robust-matrix.toml (design.method = robust) holds it and meets the nominal "
                                "goals on this rod, but buzzes; docs/tuned/stiff-shaft.toml (lqr.q_shaft_angle = 300) "
-                               "holds it without refinement, but its nominal swing-up settles late (README, Robust design)",
+                               "holds it without refinement (README, A stiffer shaft)",
     ("damping*10", "swingup"): "caught at 0.96 s, then the same instability as balance",
 }
 CASE_SETS: dict[str, tuple[str, ...]] = {
