@@ -19,7 +19,7 @@ def motor(sil):
 
 def test_stall_duty_is_current_times_resistance_over_supply(sil):
     kt, ke, R, V, _ = motor(sil)
-    tau = sil.catch_at(488)  # at rest: no back-EMF; 0.6 deg from upright stays below the torque limit
+    tau = sil.catch_at(489)  # at rest: no back-EMF; 0.2 deg from upright stays below the torque limit
     assert sil.rate == 0.0  # the shaft at rest [rad/s], simulated
     assert 0.0 < abs(tau) < 0.2
     current = tau / kt

@@ -93,8 +93,8 @@ def test_sampled_cost_matches_brute_force_quadrature():
 
 # --- CLI: gains, refusal, header ----------------------------------------------------------------
 
-PAPER_WEIGHTS = ["--set", "lqr.q_angle=0.5", "--set", "lqr.q_rate=0.1", "--set", "observer.process_noise_rate=0.01",
-                 "--set", "observer.measurement_noise=1.0"]
+PAPER_WEIGHTS = ["--set", "lqr.q_angle=0.5", "--set", "lqr.q_shaft_angle=0.0", "--set", "lqr.q_rate=0.1",
+                 "--set", "observer.process_noise_rate=0.01", "--set", "observer.measurement_noise=1.0"]
 
 
 def test_unstable_design_is_refused_with_exit_3(tmp_path):

@@ -404,8 +404,8 @@ def test_bad_outputs_and_counts_fail_before_any_run(argv, words, tmp_path, capsy
 
 def test_plant_option_judges_the_design_on_another_rod(tmp_path, capsys):
     """--plant FILE: the design stays the default's, the rod (physics and [plant] table) is FILE's."""
-    far = tmp_path / "far.toml"  # a rotor 3x heavier on a 10-edge N-link rod: the default design drops it
-    far.write_text(load_params().with_overrides("motor.rotor_inertia=1.5e-6", 'plant.model="inextensible"',
+    far = tmp_path / "far.toml"  # a rotor 5x heavier on a 10-edge N-link rod: the default design drops it
+    far.write_text(load_params().with_overrides("motor.rotor_inertia=2.5e-6", 'plant.model="inextensible"',
                                                 "plant.edges=10").to_toml())
     runs, docs = {}, {}
     for tag, extra in (("own", []), ("far", ["--plant", str(far)])):
@@ -421,7 +421,7 @@ def test_plant_option_judges_the_design_on_another_rod(tmp_path, capsys):
         assert own["plant"].startswith("der, 30 edges") and other["plant"].startswith("inextensible, 10 edges")
     assert docs["far"]["plant_source"] == str(far) and docs["own"]["plant_source"] is None
     assert docs["far"]["parameters"]["motor"]["rotor_inertia"] == load_params()["motor"]["rotor_inertia"]
-    assert docs["far"]["plant_parameters"]["motor"]["rotor_inertia"] == 1.5e-6
+    assert docs["far"]["plant_parameters"]["motor"]["rotor_inertia"] == 2.5e-6
 
 
 class _ScriptedRunner:

@@ -18,7 +18,7 @@ from host_tools import run_rodctl
 
 ROBUST_FILE = paths.REPO / "docs/tuned/robust-damping.toml"
 MATRIX_FILE = paths.REPO / "docs/tuned/robust-matrix.toml"  # + design.robust_nominal_decay = 2.5
-STIFF_FILE = paths.REPO / "docs/tuned/stiff-shaft.toml"  # the default + lqr.q_shaft_angle = 300
+SOFT_FILE = paths.REPO / "docs/tuned/low-ripple.toml"  # the previous default: lqr.q_shaft_angle = 0, q_angle = 4.86
 
 
 @pytest.fixture(scope="module")
@@ -228,7 +228,8 @@ def _ripple(p) -> tuple[float, float]:
 
 def test_report_warns_of_the_ringing_mode_the_firmware_then_buzzes_at():
     """`rodctl gains --report` flags a loop mode damped below 0.1; in the SIL on the faithful plant
-    the balanced rod's torque then ripples at that frequency, three times the default's ripple."""
+    the balanced rod's torque then ripples at that frequency, twice the default's ripple and three times
+    the previous weights' (docs/tuned/low-ripple.toml)."""
     from rodgains.report import least_damped_mode, report_text
 
     robust = design(load_params(MATRIX_FILE))
@@ -241,8 +242,9 @@ def test_report_warns_of_the_ringing_mode_the_firmware_then_buzzes_at():
 
     rms, peak_hz = _ripple(load_params(MATRIX_FILE))
     default_rms, _ = _ripple(load_params())
+    soft_rms, _ = _ripple(load_params(SOFT_FILE))
     assert peak_hz == pytest.approx(hz, rel=0.1)
-    assert rms > 0.04 and rms > 3 * default_rms  # N m RMS
+    assert rms > 0.04 and rms > 1.5 * default_rms and rms > 3 * soft_rms  # N m RMS: 58, 29, 12 mN m
 
 
 def test_noise_torque_gradient_matches_finite_differences(lqg):
@@ -290,17 +292,17 @@ def test_noise_torque_limit_removes_the_buzz_and_still_holds_ten_times_the_dampi
 
 
 @pytest.mark.parametrize("task", ["balance", "swingup"])
-def test_a_stiffer_shaft_holds_ten_times_the_damping_without_refinement(task):
-    """lqr.q_shaft_angle = 300, q_angle = 10 (docs/tuned/stiff-shaft.toml): the plain LQG design, no refinement, is
-    linearly stable on the faithful plant with ten times the rod damping (the default is not), and the
-    firmware holds that rod in both tasks, where the default's drops it."""
-    stiff = load_params(STIFF_FILE)
-    assert stiff["lqr"]["q_shaft_angle"] == 300.0 and stiff["design"]["method"] == "sampled"
+def test_the_stiff_shaft_is_what_holds_ten_times_the_damping(task):
+    """The default's stiff shaft (lqr.q_shaft_angle = 325 with q_angle = 10), plain LQG with no refinement, is
+    linearly stable on the faithful plant with ten times the rod damping; the previous weights
+    (docs/tuned/low-ripple.toml: no shaft weight, q_angle 4.86) are not, and the firmware drops that rod."""
+    stiff, soft = load_params(), load_params(SOFT_FILE)
+    assert stiff["lqr"]["q_shaft_angle"] == 325.0 and stiff["design"]["method"] == "sampled"
+    assert soft["lqr"]["q_shaft_angle"] == 0.0
     damped = matrix.CASES["damping*10"]
-    for p, stable in ((stiff, True), (load_params(), False)):
+    for p, stable in ((stiff, True), (soft, False)):
         d = design(p)
         radius = linear_check.loop_radius(d, matrix.apply_overrides(p, damped.plant_overrides))
-        assert (radius < 0.9997) if stable else (radius > 1.003), (p.source, radius)  # 0.99959, 1.0039
-    r = matrix.run_case(stiff, damped, task)
-    assert r["passed"] and r["fault_reason"] == 0, r
-    assert r["final_dev_deg"] < 1.0
+        assert (radius < 0.9996) if stable else (radius > 1.003), (p.source, radius)  # 0.99947, 1.0039
+    r = matrix.run_case(soft, damped, task)
+    assert not r["passed"] and r["final_dev_deg"] > 90.0, r  # the default holds it: tests/test_robustness_matrix.py

@@ -20,7 +20,8 @@ def _poles(z: np.ndarray, dt: float, k: int = 4) -> str:
 
 
 # Sec. III: lqr weights Q_theta = 0.5, Q_thetadot = 0.1, R = 1; observer 0.05, 0.01, 1.
-PAPER_WEIGHTS = ["lqr.q_angle=0.5", "lqr.q_rate=0.1", "lqr.r_torque=1.0", "observer.process_noise_angle=0.05",
+PAPER_WEIGHTS = ["lqr.q_angle=0.5", "lqr.q_shaft_angle=0.0", "lqr.q_rate=0.1", "lqr.r_torque=1.0",
+                 "observer.process_noise_angle=0.05",
                  "observer.process_noise_rate=0.01", "observer.measurement_noise=1.0"]
 
 

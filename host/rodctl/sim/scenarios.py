@@ -253,7 +253,7 @@ def state_feedback_run(label: str, p: Params, *, theta0, seconds: float, law: st
 # The paper's figures keep the LQR weights they were checked with: the defaults are tuned for the
 # observer-based firmware on the faithful plant (q_rate 1.8e-4), and that nearly rate-blind K, run as
 # the figures' unlimited full-state feedback on the bare rod at 1.1 L_crit, whips the rod off the model.
-FIGURE_WEIGHTS = ("lqr.q_angle=10.0", "lqr.q_rate=0.01")
+FIGURE_WEIGHTS = ("lqr.q_angle=10.0", "lqr.q_shaft_angle=0.0", "lqr.q_rate=0.01")
 
 
 def _bare(p: Params) -> Params:
