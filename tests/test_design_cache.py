@@ -115,3 +115,21 @@ def test_the_cache_folder_follows_the_environment(monkeypatch, tmp_path):
     assert design_cache.directory() == tmp_path / "xdg" / "rodgains"
     monkeypatch.setenv("RODGAINS_CACHE_DIR", str(tmp_path / "mine"))
     assert design_cache.directory() == tmp_path / "mine"
+
+
+def test_a_write_that_fails_midway_leaves_the_old_file_and_no_temporary(tmp_path):
+    """rodgains.atomic_file (the cache's, the logs' and the robustness outputs' writer): a reader sees
+    the old file or the new one, never half of one."""
+    from rodgains.atomic_file import atomic_write, replacing
+
+    target = atomic_write(tmp_path / "out" / "run.json", '{"old": 1}\n')
+    assert target.read_text() == '{"old": 1}\n'
+    with pytest.raises(RuntimeError):
+        with replacing(target) as tmp:
+            tmp.write_text('{"new": ')
+            raise RuntimeError("the writer died")
+    assert target.read_text() == '{"old": 1}\n'
+    assert sorted(p.name for p in target.parent.iterdir()) == ["run.json"]
+    atomic_write(target, b'{"new": 2}\n')
+    assert target.read_text() == '{"new": 2}\n'
+    assert sorted(p.name for p in target.parent.iterdir()) == ["run.json"]

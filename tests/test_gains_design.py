@@ -266,3 +266,15 @@ def test_report_lists_critical_lengths_margins_and_the_sampled_paper_gain():
     assert "phase margin" in out and "stable for actuator gain in" in out
     line = [x for x in out.splitlines() if "bare rod of Table I" in x][0]
     assert "UNSTABLE" in line and "sampled spectral radius 20.1" in line
+
+
+def test_report_points_a_rod_past_the_critical_length_to_the_soft_shaft():
+    """The stiff shaft clamps the rod's foot: past 1.05 x the critical length the report says so (the default
+    design holds 1.05 from 10 deg, not 1.06; README, longest rod). Table I's rod (1.006 x) gets no note."""
+    long_rod = rodctl("gains", "--report", "--set", "rod.length=0.165")  # 1.071 x the continuum's 15.40 cm
+    assert long_rod.returncode == 0, long_rod.stderr
+    note = [x for x in long_rod.stdout.splitlines() if "NOTE: lqr.q_shaft_angle = 325" in x]
+    assert len(note) == 1 and "docs/tuned/low-ripple.toml" in note[0]
+    soft = rodctl("gains", "--report", "--set", "rod.length=0.165", "--set", "lqr.q_shaft_angle=0")
+    table_i = rodctl("gains", "--report")
+    assert "NOTE: lqr.q_shaft_angle" not in soft.stdout + table_i.stdout

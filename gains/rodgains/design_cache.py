@@ -21,12 +21,13 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import uuid
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 import scipy
+
+from .atomic_file import atomic_write
 
 PACKAGE = Path(__file__).resolve().parent
 FORMAT = 1  # bump when the stored layout changes
@@ -73,14 +74,7 @@ def load(k: str) -> dict | None:
 
 def store(k: str, record: dict) -> None:
     """Write atomically (a concurrent reader sees the whole record or none); errors are ignored."""
-    folder = directory()
-    tmp = folder / f"{k}.{uuid.uuid4().hex}.tmp"
     try:
-        folder.mkdir(parents=True, exist_ok=True)
-        tmp.write_text(json.dumps(dict(record, key=k)))
-        os.replace(tmp, folder / f"{k}.json")
+        atomic_write(directory() / f"{k}.json", json.dumps(dict(record, key=k)))
     except OSError:
-        try:
-            tmp.unlink()
-        except OSError:
-            pass
+        pass

@@ -408,6 +408,11 @@ class Params:
     def counts_per_rev(self) -> Fraction:
         return counts_fraction(self.values)
 
+    @property
+    def rad_per_count(self) -> float:
+        """One encoder count at the output shaft [rad] (2 pi / 979.2 for the default)."""
+        return 2.0 * math.pi / float(self.counts_per_rev)
+
     # --- identity ---------------------------------------------------------------------
     def canonical_json(self) -> str:
         return json.dumps(self.values, sort_keys=True, separators=(",", ":"))

@@ -8,7 +8,7 @@ from . import sampled
 from .buckling import greenhill_length, nlink_critical_length
 from .design import Design, continuous_gains, weights
 from .linearize import linearize_upright
-from .robust_design import Member, noise_torque_rms, quantization_step
+from .robust_design import Member, noise_torque_rms
 from .rod_model import RodModel
 
 
@@ -77,7 +77,21 @@ def quantization_torque(d: Design) -> float:
     the sampled loop on the design model: the linear part of the balanced torque ripple."""
     Ao, Bo, Co, Ko, Lo = d.estimator()
     return noise_torque_rms(Member("design", d.Ad, d.Bd, d.C, nominal=True), Ao, Bo, Co, Ko, Lo,
-                            quantization_step(d.params))
+                            d.params.rad_per_count)
+
+
+# Measured (README "Longest rod"): with lqr.q_shaft_angle > 0 the base clamps the rod's foot, and the
+# default design and its observer variants hold 1.05 x the critical length from 10 deg but not 1.06;
+# the soft-shaft weights reach 1.08 to 1.10.
+STIFF_SHAFT_MAX_RATIO = 1.05
+
+
+def _stiff_shaft_note(p, ratio: float) -> list[str]:
+    if p["lqr"]["q_shaft_angle"] <= 0.0 or ratio <= STIFF_SHAFT_MAX_RATIO:
+        return []
+    return [f"  NOTE: lqr.q_shaft_angle = {p['lqr']['q_shaft_angle']:g} clamps the rod's foot, and a clamped rod "
+            f"past {STIFF_SHAFT_MAX_RATIO:g} x its critical length buckles: try the soft shaft of "
+            "docs/tuned/low-ripple.toml (lqr.q_shaft_angle = 0, q_angle = 4.86; README, longest rod)"]
 
 
 def report_text(d: Design) -> str:
@@ -92,7 +106,7 @@ def report_text(d: Design) -> str:
     obs = np.linalg.eigvals(d.Ad - d.L @ d.C @ d.Ad)
     lo, hi = sampled.stable_gain_interval(d.loop)
     pm = sampled.phase_margin(d.loop)
-    rad_per_count = 2 * np.pi / float(p.counts_per_rev)
+    rad_per_count = p.rad_per_count
     bare = paper_continuous_sampled(d, bare=True)
     conf = paper_continuous_sampled(d, bare=False)
     rate = 1.0 / d.dt
@@ -108,6 +122,7 @@ def report_text(d: Design) -> str:
         f"  continuum (Greenhill, corrected eq. 23): {lc_cont * 100:.2f} cm",
         f"  N = {rod.N} link model:                    {lc_model * 100:.2f} cm",
         f"  this rod: {L_tot * 100:.2f} cm = {L_tot / lc_cont:.3f} x continuum, {L_tot / lc_model:.3f} x model",
+        *_stiff_shaft_note(p, L_tot / lc_cont),
         "",
         f"Open loop about upright: unstable poles {', '.join(f'{v:.3g}' for v in unstable) or 'none'} rad/s; "
         f"fastest {open_loop.real.min():.3g} rad/s",

@@ -161,11 +161,6 @@ def eigen_gradients(mb: Member, Ao, Bo, Co, K, L, floor: float | None = None) ->
     return got[top], [got[k] for k in slow]
 
 
-def quantization_step(p: Params) -> float:
-    """One encoder count at the output shaft [rad]."""
-    return 2.0 * math.pi / (p["encoder"]["counts_per_motor_rev"] * p["motor"]["gear_ratio"])
-
-
 def noise_torque_rms(mb: Member, Ao, Bo, Co, K, L, step: float) -> float:
     """RMS torque [N m] that encoder quantization drives through one undelayed member's loop
     (noise_torque_gradient without the gradient)."""
@@ -274,7 +269,7 @@ def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refi
     decay = p["design"]["robust_nominal_decay"]
     nominal_floor = math.exp(-decay * dt) if decay > 0 else None
     noise_max = p["design"]["robust_noise_torque"]
-    qstep = quantization_step(p)
+    qstep = p.rad_per_count
     quiet = [mb for mb in members if mb.nominal and not mb.delay] if noise_max > 0 else []
     nominal = np.array([mb.nominal for mb in members])
     nK, nL = Ko.shape[1] - (1 if disturbance else 0), Lo.shape[0]  # the disturbance's unit gain in K stays 1

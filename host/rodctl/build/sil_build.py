@@ -12,10 +12,9 @@ copy, with the firmware's warning set. Builds are cached by content (rodctl.buil
 from __future__ import annotations
 
 import argparse
-import os
-import uuid
 from pathlib import Path
 
+from rodgains.atomic_file import atomic_write
 from rodgains.errors import UserError
 
 from rodctl import paths
@@ -49,9 +48,7 @@ def write_header(params, command: str | None = None, out_root: Path | None = Non
                         "(set RODCTL_BUILD_DIR to a writable folder)") from None
     header = folder / "rod_gains.h"
     if not header.exists() or header.read_text() != text:
-        tmp = header.with_suffix(f".{uuid.uuid4().hex}.tmp")  # unique per process, thread and host
-        tmp.write_text(text)
-        os.replace(tmp, header)  # atomic: a concurrent build never sees half a header
+        atomic_write(header, text)  # a concurrent build never sees half a header
     return folder
 
 

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rodgains.atomic_file import atomic_write
 from rodgains.errors import InputError
 
 from rodctl.logs import schema
@@ -48,9 +49,7 @@ def _line(fmts, row) -> str:
 
 
 def _write_json(path: Path, obj) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(obj, indent=1) + "\n")
-    os.replace(tmp, path)
+    atomic_write(path, json.dumps(obj, indent=1) + "\n")
 
 
 class CsvSink:

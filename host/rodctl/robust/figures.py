@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rodgains.atomic_file import replacing
+
 # metric key, column title, digits
 HEAT_METRICS = (
     ("settle_s", "settle 1 deg [s]", 2),
@@ -82,8 +84,8 @@ def heatmap(rows: list[dict], path: Path, title: str) -> Path:
             s.set_visible(False)
     fig.suptitle(title, fontsize=10)
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=130)
+    with replacing(path) as tmp:
+        fig.savefig(tmp, dpi=130, format=path.suffix.lstrip(".") or "png")
     plt.close(fig)
     return path
 
@@ -167,7 +169,7 @@ def frontier_figure(rows: list[dict], x: str, y: str | None, path: Path, title: 
     ax.set_title(title + "\n" + legend, fontsize=8)
     fig.tight_layout()
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=130, bbox_inches="tight")
+    with replacing(path) as tmp:
+        fig.savefig(tmp, dpi=130, bbox_inches="tight", format=path.suffix.lstrip(".") or "png")
     plt.close(fig)
     return path
