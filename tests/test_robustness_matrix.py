@@ -134,4 +134,5 @@ def test_pumping_past_the_rigid_upright_energy_catches_a_short_stiff_rod():
     rigid = matrix.run_case(rig.with_overrides("swing_up.energy_target=1.0"), matrix.CASES["viscous*3"], "swingup")
     assert rigid["caught_at_s"] is None and not rigid["passed"], rigid
     r = matrix.run_case(rig, matrix.CASES["viscous*3"], "swingup")
-    assert r["passed"] and r["caught_at_s"] < 2.0, r
+    # measured 1.09 s: the first approach (the next one, on the other side, comes half a swing later)
+    assert r["passed"] and r["caught_at_s"] < 1.3 and r["base_turns_max"] < 0.6, r

@@ -56,7 +56,8 @@ def one_period_delay_radius(d: Design) -> float:
 # A loop mode damped less than this rings: every encoder count the rod crosses kicks it, so the
 # torque buzzes at its frequency once balanced (measured: the robust tuned files' 61 Hz mode at
 # damping ratio 0.054 makes 58 mN m RMS of 64 Hz torque ripple on the faithful plant; the default
-# design's least damped mode, 0.27 at 10 Hz, makes 12 mN m)
+# design's least damped mode, 0.27 at 10 Hz, makes 29 mN m, mostly single counts through its stiff
+# base-angle gain, and docs/tuned/low-ripple.toml's 12)
 RINGING_DAMPING_RATIO = 0.1
 
 

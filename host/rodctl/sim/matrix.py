@@ -312,7 +312,7 @@ def run_matrix(params: Params, tasks=TASKS, names=None, *, progress=None, second
 LONGEST_START_DEG = 10.0
 # The design is per rod: for the longest-rod measure each length gets the first of these design
 # variants (overrides of the parameter file) that holds it. Measured (README "Where the paper's design
-# fails"): the default's base-torque disturbance state explains the torque that holds a bent rod on a
+# fails"), on the soft-shaft weights: their base-torque disturbance state explains the torque that holds a bent rod on a
 # still shaft as a disturbance, so past ~1.05 L_crit the rod buckles unseen. Without it 1.06 holds;
 # with process noise 300 on the rates as well 1.07 to 1.10 (1.08 and 1.16 only at model order 6).
 # Those were measured on issue 8's weights; on the tuned weights the same variants reach 1.08,
