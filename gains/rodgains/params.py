@@ -153,6 +153,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "delay_periods_max": Key(int, "periods", _between(0, 10)),
     },
 }
+# The previous default's soft shaft (docs/tuned/low-ripple.toml) as overrides of the stiff default: past
+# ~1.05 x its critical length a rod holds only without the shaft weight (README, longest rod).
+SOFT_SHAFT_WEIGHTS = ("lqr.q_angle=4.86", "lqr.q_shaft_angle=0.0")
 
 
 def _cross_checks(p: dict) -> list[tuple[str, str]]:

@@ -8,6 +8,7 @@ from . import sampled
 from .buckling import greenhill_length, nlink_critical_length
 from .design import Design, continuous_gains, weights
 from .linearize import linearize_upright
+from .params import SOFT_SHAFT_WEIGHTS
 from .robust_design import Member, noise_torque_rms
 from .rod_model import RodModel
 
@@ -21,8 +22,8 @@ def _poles(z: np.ndarray, dt: float, k: int = 4) -> str:
 
 # Sec. III: lqr weights Q_theta = 0.5, Q_thetadot = 0.1, R = 1; observer 0.05, 0.01, 1.
 PAPER_WEIGHTS = ["lqr.q_angle=0.5", "lqr.q_shaft_angle=0.0", "lqr.q_rate=0.1", "lqr.r_torque=1.0",
-                 "observer.process_noise_angle=0.05",
-                 "observer.process_noise_rate=0.01", "observer.measurement_noise=1.0"]
+                 "observer.process_noise_angle=0.05", "observer.process_noise_rate=0.01",
+                 "observer.measurement_noise=1.0"]
 
 
 def paper_continuous_sampled(d: Design, bare: bool) -> dict:
@@ -83,7 +84,7 @@ def quantization_torque(d: Design) -> float:
 
 # Measured (README "Longest rod"): with lqr.q_shaft_angle > 0 the base clamps the rod's foot, and the
 # default design and its observer variants hold 1.05 x the critical length from 10 deg but not 1.06;
-# the soft-shaft weights reach 1.08 to 1.10.
+# the soft-shaft weights (the previous default's, docs/tuned/low-ripple.toml) reach 1.08 to 1.10.
 STIFF_SHAFT_MAX_RATIO = 1.05
 
 
@@ -92,7 +93,7 @@ def _stiff_shaft_note(p, ratio: float) -> list[str]:
         return []
     return [f"  NOTE: lqr.q_shaft_angle = {p['lqr']['q_shaft_angle']:g} clamps the rod's foot, and a clamped rod "
             f"past {STIFF_SHAFT_MAX_RATIO:g} x its critical length buckles: try the soft shaft of "
-            "docs/tuned/low-ripple.toml (lqr.q_shaft_angle = 0, q_angle = 4.86; README, longest rod)"]
+            f"docs/tuned/low-ripple.toml ({', '.join(SOFT_SHAFT_WEIGHTS)}; README, longest rod)"]
 
 
 def report_text(d: Design) -> str:

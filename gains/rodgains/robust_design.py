@@ -161,27 +161,12 @@ def eigen_gradients(mb: Member, Ao, Bo, Co, K, L, floor: float | None = None) ->
     return got[top], [got[k] for k in slow]
 
 
-def noise_torque_rms(mb: Member, Ao, Bo, Co, K, L, step: float) -> float:
-    """RMS torque [N m] that encoder quantization drives through one undelayed member's loop
-    (noise_torque_gradient without the gradient)."""
-    return noise_torque_gradient(mb, Ao, Bo, Co, K, L, step, gradient=False)[0]
-
-
-def noise_torque_gradient(mb: Member, Ao, Bo, Co, K, L, step: float, gradient: bool = True) -> Gradient:
-    """RMS torque [N m] that encoder quantization (white, variance step^2 / 12 per sample) drives
-    through one undelayed member's loop, and its gradient with respect to every entry of K and L.
-
-    Why: the refinement can buy robustness with a fast, lightly damped loop mode (robust-matrix.toml:
-    61 Hz, damping ratio 0.05) that every count the shaft crosses kicks, so the balanced torque
-    buzzes (58 mN m RMS at 64 Hz in the SIL against the LQG's 12). The stationary covariance sees
-    that mode through the whole loop, not one eigenvalue at a time.
-
-    With the loop z+ = M z + E v (v the quantization error, E = [0; L]: it enters the estimate)
-    and u = Cu z (Cu = [0, -K]): var u = s2 E' Y E with Y = M' Y M + Cu' Cu, and
-    d var = s2 (2 E' Y dE + 2 <Y M P, dM> + 2 Cu P dCu') with P = M P M' + E E'. M is affine in
-    each entry of K and of L, so dM is the exact difference of two loop matrices."""
+def _noise_covariance(mb: Member, Ao, Bo, Co, K, L, step: float):
+    """The loop z+ = M z + E v of one undelayed member, v the quantization error (variance
+    s2 = step^2 / 12 per sample, entering the estimate: E = [0; L]), the torque u = Cu z (Cu = [0, -K]),
+    and Y = M' Y M + Cu' Cu: var u = s2 E' Y E. Returns (M, E, Cu, s2, Y, var u [N^2 m^2])."""
     if mb.delay:
-        raise ValueError("noise_torque_gradient: undelayed members only")
+        raise ValueError("noise torque: undelayed members only")
     M = loop_matrix(mb, Ao, Bo, Co, K, L)
     n, npl, no = M.shape[0], mb.Ad.shape[0], Ao.shape[0]
     E = np.zeros((n, 1))
@@ -190,9 +175,28 @@ def noise_torque_gradient(mb: Member, Ao, Bo, Co, K, L, step: float, gradient: b
     Cu[0, npl:npl + no] = -K[0]
     s2 = step * step / 12.0
     Y = sla.solve_discrete_lyapunov(M.T, Cu.T @ Cu)
-    var = s2 * float((E.T @ Y @ E)[0, 0])
-    if not gradient:
-        return math.sqrt(max(var, 0.0)), np.zeros(K.shape[1]), np.zeros(L.shape[0])
+    return M, E, Cu, s2, Y, s2 * float((E.T @ Y @ E)[0, 0])
+
+
+def noise_torque_rms(mb: Member, Ao, Bo, Co, K, L, step: float) -> float:
+    """RMS torque [N m] that encoder quantization (white, variance step^2 / 12 per sample) drives
+    through one undelayed member's loop (one Lyapunov solution).
+
+    Why: the refinement can buy robustness with a fast, lightly damped loop mode (robust-matrix.toml:
+    61 Hz, damping ratio 0.05) that every count the shaft crosses kicks, so the balanced torque
+    buzzes (58 mN m RMS at 64 Hz in the SIL against the LQG's 12). The stationary covariance sees
+    that mode through the whole loop, not one eigenvalue at a time."""
+    return math.sqrt(max(_noise_covariance(mb, Ao, Bo, Co, K, L, step)[-1], 0.0))
+
+
+def noise_torque_gradient(mb: Member, Ao, Bo, Co, K, L, step: float) -> Gradient:
+    """noise_torque_rms and its gradient with respect to every entry of K and L.
+
+    With _noise_covariance's loop: d var = s2 (2 E' Y dE + 2 <Y M P, dM> + 2 Cu P dCu') with
+    P = M P M' + E E'. M is affine in each entry of K and of L, so dM is the exact difference of two
+    loop matrices."""
+    M, E, Cu, s2, Y, var = _noise_covariance(mb, Ao, Bo, Co, K, L, step)
+    npl = mb.Ad.shape[0]
     P = sla.solve_discrete_lyapunov(M, E @ E.T)
     G = Y @ M @ P
     CuP = (Cu @ P)[0]
@@ -298,9 +302,9 @@ def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refi
             dK = dK + 2 * NOMINAL_DECAY_WEIGHT * (mag - nominal_floor) * gK
             dL = dL + 2 * NOMINAL_DECAY_WEIGHT * (mag - nominal_floor) * gL
         for mb in quiet:  # empty unless robust_noise_torque > 0
-            rms, gK, gL = noise_torque_gradient(mb, Ao, Bo, Co, K, L, qstep)
-            over = rms / noise_max - 1.0
-            if over > 0:
+            over = noise_torque_rms(mb, Ao, Bo, Co, K, L, qstep) / noise_max - 1.0
+            if over > 0:  # the gradient costs a second Lyapunov solution and a loop matrix per gain
+                _, gK, gL = noise_torque_gradient(mb, Ao, Bo, Co, K, L, qstep)
                 J += NOISE_WEIGHT * over**2
                 dK = dK + 2 * NOISE_WEIGHT * over / noise_max * gK
                 dL = dL + 2 * NOISE_WEIGHT * over / noise_max * gL

@@ -25,7 +25,7 @@ from typing import Any, Callable
 import numpy as np
 
 from rodgains.errors import InputError
-from rodgains.params import Params
+from rodgains.params import SOFT_SHAFT_WEIGHTS, Params
 
 TASKS = ("balance", "swingup")
 
@@ -312,14 +312,13 @@ def run_matrix(params: Params, tasks=TASKS, names=None, *, progress=None, second
 LONGEST_START_DEG = 10.0
 # The design is per rod: for the longest-rod measure each length gets the first of these design
 # variants (overrides of the parameter file) that holds it. Measured (README "Where the paper's design
-# fails"), on the soft-shaft weights: their base-torque disturbance state explains the torque that holds a bent rod on a
-# still shaft as a disturbance, so past ~1.05 L_crit the rod buckles unseen. Without it 1.06 holds;
+# fails"), on the soft-shaft weights: their base-torque disturbance state explains the torque that
+# holds a bent rod on a still shaft as a disturbance, so past ~1.05 L_crit the rod buckles unseen. Without it 1.06 holds;
 # with process noise 300 on the rates as well 1.07 to 1.10 (1.08 and 1.16 only at model order 6).
 # Those were measured on issue 8's weights; on the tuned weights the same variants reach 1.08,
 # so issue 8's weights are variants too (with them, 1.10 again). The default's stiff shaft clamps the
 # rod's foot, and a clamped rod past its critical length buckles: the stiff default holds 1.05 and no
 # observer variant of it 1.06, so the soft-shaft weights (docs/tuned/low-ripple.toml's) are variants too.
-SOFT_SHAFT_WEIGHTS = ("lqr.q_angle=4.86", "lqr.q_shaft_angle=0.0")
 ISSUE8_WEIGHTS = ("lqr.q_angle=10.0", "lqr.q_shaft_angle=0.0", "lqr.q_rate=0.01",
                   "observer.process_noise_angle=0.05",
                   "observer.measurement_noise=3e-5", "lqr.friction_compensation=0.0075")
