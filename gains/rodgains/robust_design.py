@@ -178,6 +178,10 @@ def _noise_covariance(mb: Member, Ao, Bo, Co, K, L, step: float):
     return M, E, Cu, s2, Y, s2 * float((E.T @ Y @ E)[0, 0])
 
 
+def _rms(var: float) -> float:
+    return math.sqrt(max(var, 0.0))
+
+
 def noise_torque_rms(mb: Member, Ao, Bo, Co, K, L, step: float) -> float:
     """RMS torque [N m] that encoder quantization (white, variance step^2 / 12 per sample) drives
     through one undelayed member's loop (one Lyapunov solution).
@@ -186,16 +190,16 @@ def noise_torque_rms(mb: Member, Ao, Bo, Co, K, L, step: float) -> float:
     61 Hz, damping ratio 0.05) that every count the shaft crosses kicks, so the balanced torque
     buzzes (58 mN m RMS at 64 Hz in the SIL against the LQG's 12). The stationary covariance sees
     that mode through the whole loop, not one eigenvalue at a time."""
-    return math.sqrt(max(_noise_covariance(mb, Ao, Bo, Co, K, L, step)[-1], 0.0))
+    return _rms(_noise_covariance(mb, Ao, Bo, Co, K, L, step)[-1])
 
 
-def noise_torque_gradient(mb: Member, Ao, Bo, Co, K, L, step: float) -> Gradient:
+def noise_torque_gradient(mb: Member, Ao, Bo, Co, K, L, step: float, covariance=None) -> Gradient:
     """noise_torque_rms and its gradient with respect to every entry of K and L.
 
     With _noise_covariance's loop: d var = s2 (2 E' Y dE + 2 <Y M P, dM> + 2 Cu P dCu') with
     P = M P M' + E E'. M is affine in each entry of K and of L, so dM is the exact difference of two
-    loop matrices."""
-    M, E, Cu, s2, Y, var = _noise_covariance(mb, Ao, Bo, Co, K, L, step)
+    loop matrices. covariance: _noise_covariance's result for these gains, if the caller has it."""
+    M, E, Cu, s2, Y, var = covariance if covariance is not None else _noise_covariance(mb, Ao, Bo, Co, K, L, step)
     npl = mb.Ad.shape[0]
     P = sla.solve_discrete_lyapunov(M, E @ E.T)
     G = Y @ M @ P
@@ -211,7 +215,7 @@ def noise_torque_gradient(mb: Member, Ao, Bo, Co, K, L, step: float) -> Gradient
         Lj = L.copy()
         Lj[j, 0] += 1.0
         dL[j] = 2.0 * s2 * (np.sum(G * (loop_matrix(mb, Ao, Bo, Co, K, Lj) - M)) + YE[npl + j])
-    rms = math.sqrt(max(var, 0.0))
+    rms = _rms(var)
     scale = 0.5 / max(rms, 1e-300)  # d rms = d var / (2 rms)
     return rms, scale * dK, scale * dL
 
@@ -302,9 +306,10 @@ def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refi
             dK = dK + 2 * NOMINAL_DECAY_WEIGHT * (mag - nominal_floor) * gK
             dL = dL + 2 * NOMINAL_DECAY_WEIGHT * (mag - nominal_floor) * gL
         for mb in quiet:  # empty unless robust_noise_torque > 0
-            over = noise_torque_rms(mb, Ao, Bo, Co, K, L, qstep) / noise_max - 1.0
+            covariance = _noise_covariance(mb, Ao, Bo, Co, K, L, qstep)
+            over = _rms(covariance[-1]) / noise_max - 1.0
             if over > 0:  # the gradient costs a second Lyapunov solution and a loop matrix per gain
-                _, gK, gL = noise_torque_gradient(mb, Ao, Bo, Co, K, L, qstep)
+                _, gK, gL = noise_torque_gradient(mb, Ao, Bo, Co, K, L, qstep, covariance)
                 J += NOISE_WEIGHT * over**2
                 dK = dK + 2 * NOISE_WEIGHT * over / noise_max * gK
                 dL = dL + 2 * NOISE_WEIGHT * over / noise_max * gL
