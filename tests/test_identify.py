@@ -154,13 +154,17 @@ def test_identify_over_sim_with_a_hidden_plant(tmp_path):
     port = f"sim://?plant={hidden}"
     out = tmp_path / "my_rod.toml"
     r = run_rodctl("identify", "--port", port, "--experiment", "release", "--experiment", "prbs", "--yes",
-                   "--log-dir", str(tmp_path / "logs"), "--out", str(out), "--starts", "1", timeout=300)
+                   "--log-dir", str(tmp_path / "logs"), "--out", str(out), "--starts", "1",
+                   "--compensation-cases", "nominal", "--jobs", "2", timeout=400)
     assert r.returncode == 0, r.stderr
     assert "[1/2] release: a 50 mN m push" in r.stderr and "[2/2] prbs:" in r.stderr
     assert len(list((tmp_path / "logs").glob("identify-*-release.csv"))) == 1
     p = load_params(out)
     assert p["motor"]["rotor_inertia"] == pytest.approx(HIDDEN["B"]["motor.rotor_inertia"], rel=0.05)
     assert out.with_suffix(".png").stat().st_size > 10000
+    from test_identify_compensation import check_written_compensation
+
+    check_written_compensation(out, r.stdout)
 
 
 def test_identify_asks_before_moving_and_stops_without_an_answer(tmp_path):

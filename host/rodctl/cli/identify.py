@@ -180,8 +180,9 @@ def fit_logs(args, logs: list[Path], params=None, source: str = "") -> int:
     print("\n".join(F.report_lines(res)))
     print("identifiability:")
     print("\n".join("  " + s for s in F.identifiability_text(res)))
+    choice = _choose_compensation(args, R.identified_params(params, res))
     out = Path(args.out)
-    out.write_text(R.parameter_file(params, res, digests))
+    out.write_text(R.parameter_file(params, res, digests, compensation=choice))
     plot = Path(args.plot) if args.plot else out.with_suffix(".png")
     R.figure(res, plot)
     print(f"wrote {out} and {plot}")
@@ -192,11 +193,42 @@ def fit_logs(args, logs: list[Path], params=None, source: str = "") -> int:
     return 0
 
 
+def _choose_compensation(args, identified):
+    """The friction compensation for the identified rig, judged by the matrix (ident/compensation.py);
+    None: keep the nominal file's."""
+    from rodctl.ident import compensation as C
+
+    if args.compensation_cases == "none":
+        return None
+    print(f"friction compensation: {len(C.RATIOS)} candidates ({', '.join(f'{r:g}' for r in C.RATIOS)} x the "
+          f"identified Coulomb friction), each judged by the robustness matrix ({args.compensation_cases}) on the "
+          f"identified rig", file=sys.stderr, flush=True)
+    choice = C.choose(identified, cases=args.compensation_cases, jobs=args.jobs)
+    if choice is None:
+        print("friction compensation: no Coulomb friction identified; kept the nominal file's", file=sys.stderr)
+        return None
+    for c in choice.candidates:
+        print(f"  {c.line()}", file=sys.stderr)
+    print(f"friction compensation: {1e3 * choice.best.torque_nm:.2f} mN m ({choice.best.ratio:g} x)")
+    return choice
+
+
+def _check_compensation_cases(args) -> None:
+    from rodctl.sim.matrix import CASE_SETS
+
+    if args.compensation_cases != "none" and args.compensation_cases not in CASE_SETS:
+        raise InputError(f"--compensation-cases {args.compensation_cases}: unknown case set; one of "
+                         f"{', '.join(CASE_SETS)}, none")
+    if args.jobs is not None and args.jobs < 1:
+        raise InputError(f"--jobs {args.jobs}: must be >= 1")
+
+
 def run_identify(args) -> int:
     if args.logs and args.port:
         raise InputError("give recorded LOG files or --port, not both")
     if args.starts < 1:
         raise InputError("--starts must be >= 1")
+    _check_compensation_cases(args)
     if args.logs:
         check_output(args.out, "--out", force=args.force)
         # A shell glob such as logs/*.csv also matches the CSV logs' event sidecars: not logs of their own.
@@ -215,7 +247,8 @@ def register(sub) -> None:
                     "hanging, asking before each one moves the motor, log each, then fit. With LOG files: fit "
                     "recorded logs. The fit identifies rotor inertia, viscous and Coulomb friction, a "
                     "torque-constant scale and the rod's Young's modulus and damping against the project's C "
-                    "plant, and writes a complete parameter file with 95 %% intervals. Exit 2: bad input or "
+                    "plant, chooses the dry-friction compensation for the identified rig by the robustness "
+                    "matrix, and writes a complete parameter file with 95 %% intervals. Exit 2: bad input or "
                     "data that cannot identify the rig; exit 1: a value outside its physical range (not written).",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("logs", nargs="*", metavar="LOG", help="recorded logs to fit instead of running experiments")
@@ -234,5 +267,10 @@ def register(sub) -> None:
     p.add_argument("--exact-plant", action="store_true",
                    help="fit with the parameter file's [plant] as is (a DER plant makes the fit ~10x slower); "
                         "default: the inextensible rod with at most 20 flexible edges")
+    p.add_argument("--compensation-cases", default="matrix", metavar="SET",
+                   help="after the fit, choose lqr.friction_compensation for the identified rig by this case set "
+                        "of the robustness matrix (matrix, quick, nominal; ~2 min for matrix on 2 cores), or none "
+                        "to keep the nominal file's (default matrix)")
+    p.add_argument("--jobs", type=int, metavar="N", help="worker processes for that choice (default: every core)")
     add_design_args(p)
     p.set_defaults(func=run_identify)

@@ -30,11 +30,19 @@ def written_values(res: FitResult) -> tuple[dict[str, float], dict[str, str]]:
     return values, notes
 
 
-def parameter_file(params, res: FitResult, log_digests: list[tuple[str, str]]) -> str:
+def identified_params(params, res: FitResult):
+    """params with the values parameter_file writes."""
+    return with_values(params, written_values(res)[0])
+
+
+def parameter_file(params, res: FitResult, log_digests: list[tuple[str, str]], compensation=None) -> str:
     """A complete parameter file: params with the identified values, each commented with its interval,
-    headed by the SHA-256 of every log the values came from."""
+    headed by the SHA-256 of every log the values came from. compensation: the friction compensation
+    chosen for the identified rig (rodctl.ident.compensation.Choice), written with what chose it."""
     values, notes = written_values(res)
     out = with_values(params, values)
+    if compensation is not None:
+        out = out.with_overrides(f"lqr.friction_compensation={compensation.best.torque_nm!r}")
     text = out.to_toml()
     # Comments go on the lines of the keys that carry each fitted value (the scale lives in k_t and k_e).
     keys = {fp.name: ([fp.key] if fp.key else ["motor.torque_constant", "motor.back_emf_constant"]) for fp in FIT_PARAMS}
@@ -49,6 +57,8 @@ def parameter_file(params, res: FitResult, log_digests: list[tuple[str, str]]) -
                 if key in ks and name in notes:
                     what = notes[name] if name != "torque_constant_scale" else f"torque-constant scale: {notes[name]}"
                     line = f"{line}\n# ^ rodctl identify: {what}"
+            if key == "lqr.friction_compensation" and compensation is not None:
+                line += "".join(f"\n# ^ {c}" for c in compensation.comment_lines())
         lines.append(line)
     head = ["# Identified by `rodctl identify` (output-error fit against the project's C plant).",
             f"# Validation on held-out data: {res.validation_fit_pct:.1f} % fit of theta_1; "
