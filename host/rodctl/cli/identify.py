@@ -200,16 +200,16 @@ def _choose_compensation(args, identified):
 
     if args.compensation_cases == "none":
         return None
-    print(f"friction compensation: {len(C.RATIOS)} candidates ({', '.join(f'{r:g}' for r in C.RATIOS)} x the "
-          f"identified Coulomb friction), each judged by the robustness matrix ({args.compensation_cases}) on the "
-          f"identified rig", file=sys.stderr, flush=True)
+    print(f"friction compensation: {', '.join(f'{r:g}' for r in C.RATIOS)} x the identified Coulomb friction and "
+          f"the nominal file's {1e3 * identified['lqr']['friction_compensation']:.2f} mN m, each judged by the "
+          f"robustness matrix ({args.compensation_cases}) on the identified rig", file=sys.stderr, flush=True)
     choice = C.choose(identified, cases=args.compensation_cases, jobs=args.jobs)
     if choice is None:
         print("friction compensation: no Coulomb friction identified; kept the nominal file's", file=sys.stderr)
         return None
     for c in choice.candidates:
         print(f"  {c.line()}", file=sys.stderr)
-    print(f"friction compensation: {1e3 * choice.best.torque_nm:.2f} mN m ({choice.best.ratio:g} x)")
+    print(f"friction compensation: {1e3 * choice.best.torque_nm:.2f} mN m ({choice.best.ratio:.3g} x)")
     return choice
 
 

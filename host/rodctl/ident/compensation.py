@@ -19,7 +19,7 @@ whole matrix, 52 runs), compensation as a multiple of the rig's Coulomb friction
 Rig A misses the 1.5 s balance goal from 1.5 x up; rig C misses the 2 s swing-up settling goal
 below 1.6 x. No one ratio serves both, so the identified Coulomb friction alone does not fix the
 compensation: each candidate ratio is judged by the matrix on the identified rig itself (its
-faithful plant), and the best is written. On rig A the identified plant gave the hidden rig's
+faithful plant), with the parameter file's own value, and the best is written. On rig A the identified plant gave the hidden rig's
 verdict at every ratio measured on both (1.2, 1.3, 1.4, 1.5 x).
 
 Ranking: most runs passed; then the widest margin on the nominal goals (the smaller of the balance
@@ -49,6 +49,7 @@ class Candidate:
     runs: int  # matrix runs
     margin_s: float  # the smaller nominal settling margin [s] (negative: a goal missed)
     failed: tuple[str, ...]  # "case/task" of every run that failed
+    nominal: bool = False  # the parameter file's own value
 
     def line(self) -> str:
         miss = f"; fails {', '.join(self.failed)}" if self.failed else ""
@@ -56,7 +57,9 @@ class Candidate:
                   else "a nominal goal missed")
         if math.isinf(self.margin_s) and self.margin_s > 0:
             margin = "no nominal run"
-        return f"{self.ratio:g} x = {1e3 * self.torque_nm:.2f} mN m: {self.passed}/{self.runs} passed, {margin}{miss}"
+        own = " (the nominal file's)" if self.nominal else ""
+        return (f"{self.ratio:.3g} x = {1e3 * self.torque_nm:.2f} mN m{own}: {self.passed}/{self.runs} passed, "
+                f"{margin}{miss}")
 
 
 @dataclass(frozen=True)
@@ -68,7 +71,7 @@ class Choice:
 
     def comment_lines(self) -> list[str]:
         head = (f"rodctl identify: chosen by the robustness matrix ({self.cases}) on the identified rig, "
-                f"{self.best.ratio:g} x the identified Coulomb friction; candidates:")
+                f"{self.best.ratio:.3g} x the identified Coulomb friction; candidates:")
         return [head] + ["  " + c.line() for c in self.candidates]
 
 
@@ -88,9 +91,9 @@ def nominal_margin(rows: list[dict]) -> float:
     return out
 
 
-def candidate(ratio: float, torque: float, rows: list[dict]) -> Candidate:
+def candidate(ratio: float, torque: float, rows: list[dict], nominal: bool = False) -> Candidate:
     failed = tuple(f"{r['case']}/{r['task']}" for r in rows if not r.get("passed"))
-    return Candidate(ratio, torque, len(rows) - len(failed), len(rows), nominal_margin(rows), failed)
+    return Candidate(ratio, torque, len(rows) - len(failed), len(rows), nominal_margin(rows), failed, nominal)
 
 
 def rank_key(c: Candidate):
@@ -99,21 +102,26 @@ def rank_key(c: Candidate):
 
 def choose(params: Params, *, cases: str = "matrix", ratios=RATIOS, jobs: int | None = None,
            scheduler: str | None = None, progress: bool = True) -> Choice | None:
-    """Judge every candidate ratio x params' Coulomb friction by the matrix case set `cases` on params'
-    own faithful plant; None when params has no dry friction to cancel."""
+    """Judge every candidate ratio x params' Coulomb friction, and params' own compensation (so the
+    choice is never worse on the identified rig than keeping it), by the matrix case set `cases` on
+    params' own faithful plant; None when params has no dry friction to cancel."""
     from rodctl.robust import score as S
     from rodctl.robust.execute import Runner
 
     coulomb = params["motor"]["coulomb_friction"]
     if coulomb < MIN_COULOMB_NM:
         return None
-    designs = [(r, params.with_overrides(f"lqr.friction_compensation={r * coulomb!r}")) for r in ratios]
-    units = [S.units(p, cases=cases, samples=0, info=(("ratio", r),)) for r, p in designs]
+    own = params["lqr"]["friction_compensation"]
+    torques = [(r, r * coulomb, False) for r in ratios]
+    if all(abs(t - own) > 1e-3 * own for _, t, _ in torques):
+        torques.append((own / coulomb, own, True))
+    designs = [(r, params.with_overrides(f"lqr.friction_compensation={t!r}"), mine) for r, t, mine in torques]
+    units = [S.units(p, cases=cases, samples=0, info=(("ratio", r),)) for r, p, _ in designs]
     with Runner(jobs=jobs, scheduler=scheduler, progress=progress) as runner:
         rows = runner.run([u for us in units for u in us], desc="friction compensation")
     found, at = [], 0
-    for (r, p), us in zip(designs, units):
-        found.append(candidate(r, p["lqr"]["friction_compensation"], rows[at:at + len(us)]))
+    for (r, p, mine), us in zip(designs, units):
+        found.append(candidate(r, p["lqr"]["friction_compensation"], rows[at:at + len(us)], nominal=mine))
         at += len(us)
     best = max(found, key=rank_key)
     return Choice(designs[found.index(best)][1], best, tuple(found), cases)
