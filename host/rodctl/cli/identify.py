@@ -214,13 +214,12 @@ def _choose_compensation(args, identified):
 
 
 def _check_compensation_cases(args) -> None:
-    from rodctl.sim.matrix import CASE_SETS
+    """Before the motor moves: the choice after the fit must not fail on its options."""
+    from rodctl.robust.execute import check_jobs
+    from rodctl.robust.score import case_set
 
-    if args.compensation_cases != "none" and args.compensation_cases not in CASE_SETS:
-        raise InputError(f"--compensation-cases {args.compensation_cases}: unknown case set; one of "
-                         f"{', '.join(CASE_SETS)}, none")
-    if args.jobs is not None and args.jobs < 1:
-        raise InputError(f"--jobs {args.jobs}: must be >= 1")
+    case_set(args.compensation_cases, option="--compensation-cases", also=("none",))
+    check_jobs(args.jobs)
 
 
 def run_identify(args) -> int:

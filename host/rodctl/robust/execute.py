@@ -115,12 +115,17 @@ def default_jobs() -> int:
         return os.cpu_count() or 1
 
 
+def check_jobs(jobs: int | None) -> None:
+    """--jobs: None (every core) or at least 1; a command checks it before work that cannot be undone."""
+    if jobs is not None and jobs < 1:
+        raise InputError(f"--jobs {jobs}: must be >= 1")
+
+
 class Runner:
     """Runs units on a local process pool (default: every core) or on the Dask cluster at `scheduler`."""
 
     def __init__(self, jobs: int | None = None, scheduler: str | None = None, progress: bool = True):
-        if jobs is not None and jobs < 1:
-            raise InputError(f"--jobs {jobs}: must be >= 1")
+        check_jobs(jobs)
         self.scheduler = scheduler
         self.progress = progress
         self.jobs = jobs or default_jobs()

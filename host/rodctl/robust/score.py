@@ -34,11 +34,14 @@ SETTLE_SCALE_S = 1.0
 ERROR_SCALE_DEG = 180.0
 
 
-def case_set(name: str) -> tuple[str, ...]:
+def case_set(name: str, option: str = "--cases", also: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """The matrix cases of set `name`; `also`: further words the option accepts (they name no case)."""
     from rodctl.sim.matrix import CASE_SETS
 
+    if name in also:
+        return ()
     if name not in CASE_SETS:
-        raise InputError(f"--cases {name}: unknown case set; one of {', '.join(CASE_SETS)}")
+        raise InputError(f"{option} {name}: unknown case set; one of {', '.join((*CASE_SETS, *also))}")
     return CASE_SETS[name]
 
 
