@@ -25,6 +25,9 @@ HIDDEN = {
           "kt_scale": 0.92, "rod.youngs_modulus": 5.2e5, "rod.damping": 0.0008},
     "C": {"motor.rotor_inertia": 5.6e-7, "motor.viscous_friction": 9e-4, "motor.coulomb_friction": 0.0025,
           "kt_scale": 1.12, "rod.youngs_modulus": 7.2e5, "rod.damping": 0.002},
+    # a random draw within +-30 % on which the fast fit rod alone misses the viscous friction by 7.5 %
+    "D": {"motor.rotor_inertia": 6.05e-7, "motor.viscous_friction": 4.01e-4, "motor.coulomb_friction": 0.00497,
+          "kt_scale": 1.034, "rod.youngs_modulus": 6.4e5, "rod.damping": 0.000933},
 }
 TOLERANCE = {"rotor_inertia": 0.05, "viscous_friction": 0.05, "coulomb_friction": 0.10, "youngs_modulus": 0.05,
              "torque_constant_scale": 0.05, "damping": 0.25}
@@ -63,7 +66,7 @@ def fitted(name: str) -> F.FitResult:
     return F.fit(list(records(name)), load_params(), starts=1)
 
 
-@pytest.mark.parametrize("name", ["A", "C"])  # B (viscous +4.1 %): README, rodctl identify section
+@pytest.mark.parametrize("name", ["A", "B", "C", "D"])
 def test_fit_recovers_a_hidden_rig(name):
     recs = list(records(name))
     assert all(r.ended_in == 0 and r.end_reason == 0 for r in recs), "every experiment plays to its end"
@@ -77,6 +80,18 @@ def test_fit_recovers_a_hidden_rig(name):
         assert res.identifiable[p], (p, res.why[p])
     assert res.validation_fit_pct > 95
     assert not res.out_of_range
+
+
+def test_the_polish_on_the_files_plant_removes_the_fast_rods_bias():
+    """The starts search on the inextensible N = 20 rod; the rig is a DER N = 30 rod. On rig D that
+    mismatch alone puts the viscous friction more than 5 % off; the polish on the file's plant recovers it."""
+    b = truth("D")["viscous_friction"]
+    fast = F.fit(list(records("D")), load_params(), starts=1, polish=False)
+    assert fast.model and abs(fast.values["viscous_friction"] / b - 1) > 0.05, fast.values
+    res = fitted("D")
+    assert res.model == () and "polish" in res.starts[-1]
+    fast_err, err = abs(fast.values["viscous_friction"] / b - 1), abs(res.values["viscous_friction"] / b - 1)
+    assert err < 0.05 and err < fast_err / 2, (fast_err, err)
 
 
 def _record(duty, torque, count, name="x"):
@@ -129,7 +144,7 @@ def test_an_experiment_that_trips_stops_the_motor_with_its_reason():
 
 def test_a_value_outside_its_physical_range_is_flagged_not_written():
     recs = list(records("A"))
-    res = F.fit(recs, load_params(), starts=1, max_nfev=3)
+    res = F.fit(recs, load_params(), starts=1, max_nfev=3, polish=False)
     bad = dataclasses.replace(res, values={**res.values, "rotor_inertia": 5e-5},
                               out_of_range={"rotor_inertia": "5e-05 kg m^2 is outside the physical range"})
     values, notes = R.written_values(bad)
@@ -140,7 +155,7 @@ def test_a_value_outside_its_physical_range_is_flagged_not_written():
 
 
 def test_written_file_is_complete_and_loads(tmp_path):
-    res = F.fit(list(records("A")), load_params(), starts=1, max_nfev=3)
+    res = F.fit(list(records("A")), load_params(), starts=1, max_nfev=3, polish=False)
     f = tmp_path / "my_rod.toml"
     f.write_text(R.parameter_file(load_params(), res, [("a.csv", "ab" * 32)]))
     p = load_params(f)
@@ -182,6 +197,7 @@ def test_a_safety_trip_over_sim_keeps_the_log_and_names_the_limit(tmp_path):
     assert r.returncode == 1
     last = r.stderr.strip().splitlines()[-1]
     assert "safety limit tripped: angle limit (ANGLE_LIMIT)" in last and "log kept" in last
+    assert last.endswith("for smaller swings: --scale 2.1")  # 0.7 x the scale that tripped
     logs = list(tmp_path.glob("identify-*-steps.csv"))
     assert len(logs) == 1 and str(logs[0]) in last
     assert not (tmp_path / "o.toml").exists()
