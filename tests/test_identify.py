@@ -25,7 +25,7 @@ HIDDEN = {
           "kt_scale": 0.92, "rod.youngs_modulus": 5.2e5, "rod.damping": 0.0008},
     "C": {"motor.rotor_inertia": 5.6e-7, "motor.viscous_friction": 9e-4, "motor.coulomb_friction": 0.0025,
           "kt_scale": 1.12, "rod.youngs_modulus": 7.2e5, "rod.damping": 0.002},
-    # a random draw within +-30 % on which the fast fit rod alone misses the viscous friction by 7.5 %
+    # a random draw within +-30 % on which the fast fit rod alone misses the viscous friction by 8 %
     "D": {"motor.rotor_inertia": 6.05e-7, "motor.viscous_friction": 4.01e-4, "motor.coulomb_friction": 0.00497,
           "kt_scale": 1.034, "rod.youngs_modulus": 6.4e5, "rod.damping": 0.000933},
 }

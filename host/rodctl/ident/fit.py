@@ -36,7 +36,7 @@ CORRELATION_LIMIT = 0.95
 UNIDENTIFIABLE_REL_CI = 0.5  # a 95 % half-width beyond 50 % of the value: not identifiable
 # The search's plant: the parameter file's rod, as the inextensible N-link with at most this many
 # flexible edges (a DER plant integrates at ~12 steps per control period, ~5x slower). Its mismatch
-# with a DER rig biases the viscous friction: on 30 random DER N = 30 rigs it came out -6 % to
+# with a DER rig biases the viscous friction: on 30 random DER N = 30 rigs it came out -5.8 % to
 # +7.5 % (5 of 30 beyond 5 %), so the best start is then polished on the file's own plant
 # (`polish` in fit()), which brought those rigs within 1.5 % (README, rodctl identify).
 FAST_MODEL_EDGES = 20
