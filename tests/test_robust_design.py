@@ -16,10 +16,11 @@ from rodctl.sim import linear_check, matrix
 
 from host_tools import run_rodctl
 
-# Session 10 found these five failing on a new machine (AMD EPYC; numpy 2.4.6, scipy 1.17.1, also with
-# scipy 1.16.3 / 1.15.3 and numpy 2.3.5, and with every OpenBLAS core type) with no change to gains/:
-# the robust refinement's guard keeps 0.8 of the step instead of 1.0 there. Not yet understood; the
-# default design (method "sampled") is unaffected. Issue 10's closing note says so.
+# Session 10 found five runs here failing on a new machine (AMD EPYC; numpy 2.4.6, scipy 1.17.1, also
+# with scipy 1.16.3 / 1.15.3 and numpy 2.3.5, and with every OpenBLAS core type): the robust
+# refinement's guard keeps 0.8 of the step instead of 1.0 there, with robust_design.py as of
+# 2f3e727 as well as today's. Not yet understood; the default design (method "sampled") is
+# unaffected. Issue 10's closing note says so.
 REFINEMENT_DIFFERS_BY_MACHINE = pytest.mark.xfail(
     strict=False, reason="robust refinement's guard step differs by machine (0.8 vs 1.0): under investigation")
 
@@ -122,9 +123,9 @@ def test_nominal_decay_penalty_gradient_matches_finite_differences():
         assert gL[i] == pytest.approx((penalty(Ko, L2) - base) / h, rel=1e-3, abs=1e-9), ("L", i)
 
 
-@pytest.mark.parametrize("case,task", [("nominal", "balance"), ("nominal", "swingup"), ("damping*10", "balance"),
+@pytest.mark.parametrize("case,task", [("nominal", "balance"), ("nominal", "swingup"),
+                                       pytest.param("damping*10", "balance", marks=REFINEMENT_DIFFERS_BY_MACHINE),
                                        ("damping*10", "swingup"), ("coulomb*2", "swingup")])
-@REFINEMENT_DIFFERS_BY_MACHINE
 def test_matrix_file_meets_the_nominal_goals_and_holds_ten_times_the_damping(case, task):
     """docs/tuned/robust-matrix.toml in the SIL on the faithful plant: nominal balance within 1 deg by
     1.5 s, swing-up settled within 2 s of the catch (the nominal cases' strict criterion), and damping

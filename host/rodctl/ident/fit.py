@@ -279,25 +279,27 @@ def fit(records: list[Record], params, *, fitted: tuple[str, ...] = NAMES, start
     # Deterministic starts: the nominal point, then every parameter low, then high (rotor and rod
     # guesses are often off by tens of percent, the friction terms by factors).
     candidates = [x_nom, np.clip(x_nom * 0.6, lo, hi), np.clip(x_nom * 1.6, lo, hi)]
-    tried, best = [], None
+    tried = []
+
+    def solve(kind: str, x0, nfev: int):
+        r = least_squares(residual, x0, bounds=(lo, hi), x_scale=np.maximum(x0, 0.05), diff_step=1e-4,
+                          max_nfev=nfev, method="trf")
+        tried.append({kind: {fp.name: float(a * scale[fp.name]) for fp, a in zip(fps, x0)},
+                      "cost": float(r.cost), "nfev": int(r.nfev)})
+        return r
+
+    best = None
     for i, x0 in enumerate(candidates[:max(1, starts)]):
         if progress:
             progress(f"fit: start {i + 1}/{min(starts, len(candidates))}")
-        r = least_squares(residual, x0, bounds=(lo, hi), x_scale=np.maximum(x0, 0.05), diff_step=1e-4,
-                          max_nfev=max_nfev, method="trf")
-        tried.append({"start": {fp.name: float(a * scale[fp.name]) for fp, a in zip(fps, x0)},
-                      "cost": float(r.cost), "nfev": int(r.nfev)})
+        r = solve("start", x0, max_nfev)
         if best is None or r.cost < best.cost:
             best = r
     if polish and model:
         model = ()  # simulate() reads it: from here on, the file's own plant
         if progress:
             progress("fit: polish on the parameter file's plant")
-        r = least_squares(residual, best.x, bounds=(lo, hi), x_scale=np.maximum(best.x, 0.05), diff_step=1e-4,
-                          max_nfev=POLISH_NFEV, method="trf")
-        tried.append({"polish": {fp.name: float(a * scale[fp.name]) for fp, a in zip(fps, best.x)},
-                      "cost": float(r.cost), "nfev": int(r.nfev)})
-        best = r
+        best = solve("polish", best.x, POLISH_NFEV)
     x = best.x
     J = best.jac
     m, p = J.shape
