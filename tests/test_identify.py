@@ -192,8 +192,10 @@ def test_identify_asks_before_moving_and_stops_without_an_answer(tmp_path):
 
 
 def test_a_safety_trip_over_sim_keeps_the_log_and_names_the_limit(tmp_path):
-    r = run_rodctl("identify", "--port", "sim://", "--experiment", "steps", "--scale", "3", "--yes",
-                   "--log-dir", str(tmp_path), "--out", str(tmp_path / "o.toml"), timeout=120)
+    """With the host's soft limit off (--soft-limit 1), 75 mN m steps swing the rod into the firmware's
+    own 60 deg limit: FAULT."""
+    r = run_rodctl("identify", "--port", "sim://", "--experiment", "steps", "--scale", "3", "--soft-limit", "1",
+                   "--yes", "--log-dir", str(tmp_path), "--out", str(tmp_path / "o.toml"), timeout=120)
     assert r.returncode == 1
     last = r.stderr.strip().splitlines()[-1]
     assert "safety limit tripped: angle limit (ANGLE_LIMIT)" in last and "log kept" in last
@@ -201,6 +203,54 @@ def test_a_safety_trip_over_sim_keeps_the_log_and_names_the_limit(tmp_path):
     logs = list(tmp_path.glob("identify-*-steps.csv"))
     assert len(logs) == 1 and str(logs[0]) in last
     assert not (tmp_path / "o.toml").exists()
+
+
+def test_a_swing_past_the_soft_limit_is_stopped_and_played_again_smaller(tmp_path):
+    """At 1.25 x the default rod's chirp stays within 40 deg, but its steps would swing it to about 53 deg
+    (SIL: 51 deg at 1.2 x, 56 at 1.3 x), past the host's 48 deg soft limit and short of the firmware's
+    60: the host stops them (no FAULT), plays them again 0.7 x smaller (21.875 mN m, about 35 deg) and
+    fits the complete runs only; the stopped run's log stays on disk."""
+    out = tmp_path / "o.toml"
+    r = run_rodctl("identify", "--port", "sim://", "--experiment", "chirp", "--experiment", "steps",
+                   "--scale", "1.25", "--settle", "2", "--yes", "--log-dir", str(tmp_path / "logs"), "--out", str(out),
+                   "--starts", "1", "--compensation-cases", "none", timeout=400)
+    assert r.returncode == 0, r.stderr
+    stopped = [ln for ln in r.stderr.splitlines() if ln.strip().startswith("stopped:")]
+    assert len(stopped) == 1 and "(soft limit 48 deg)" in stopped[0] and "-steps.csv" in stopped[0]
+    assert int(stopped[0].split("swung ")[1].split(" deg")[0]) >= 48
+    assert "[2/2] steps: torque steps +21.875 mN m, 0, -21.875 mN m, 0" in r.stderr
+    done = [ln for ln in r.stderr.splitlines() if ln.strip().startswith("done:")]
+    assert len(done) == 2 and all(int(ln.split("largest swing ")[1].split(" deg")[0]) < 48 for ln in done)
+    logs = sorted(p.name for p in (tmp_path / "logs").glob("identify-*.csv") if not p.name.endswith(".events.csv"))
+    assert [n.split("-", 3)[3] for n in logs] == ["chirp.csv", "steps-2.csv", "steps.csv"]
+    text = out.read_text()
+    assert next(n for n in logs if n.endswith("steps-2.csv")) in text
+    assert next(n for n in logs if n.endswith("-steps.csv")) not in text
+    assert load_params(out)["motor"]["rotor_inertia"] == pytest.approx(load_params()["motor"]["rotor_inertia"], rel=0.05)
+
+
+def test_a_rig_that_keeps_swinging_too_far_stops_after_three_tries(tmp_path):
+    """With a 15 deg soft limit (--soft-limit 0.25), the default steps swing past it at 1, 0.7 and 0.49 x
+    (SIL: 40, 28 and 20 deg): the host gives up after three stopped tries, exit 1, motor off, every log
+    kept, no parameter file, and names a --scale below the last one tried."""
+    out = tmp_path / "o.toml"
+    r = run_rodctl("identify", "--port", "sim://", "--experiment", "steps", "--soft-limit", "0.25", "--settle", "2",
+                   "--yes", "--log-dir", str(tmp_path), "--out", str(out), timeout=300)
+    assert r.returncode == 1, r.stderr
+    assert r.stderr.count("(soft limit 15 deg)") == 3
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("rodctl: steps: swung") and "after 3 tries; motor stopped" in last
+    assert last.endswith("for smaller swings: --scale 0.34")  # 0.7^3
+    assert len([p for p in tmp_path.glob("identify-*-steps*.csv") if not p.name.endswith(".events.csv")]) == 3
+    assert not out.exists()
+
+
+def test_soft_limit_outside_zero_to_one_is_refused_before_anything_moves(tmp_path):
+    r = run_rodctl("identify", "--port", "sim://", "--soft-limit", "1.5", "--yes", "--log-dir", str(tmp_path),
+                   "--out", str(tmp_path / "o.toml"), timeout=60)
+    assert r.returncode == 2
+    assert r.stderr.strip() == "rodctl: --soft-limit must be in (0, 1], got 1.5"
+    assert not list(tmp_path.iterdir())
 
 
 def _identified(name: str, tmp_path):

@@ -28,9 +28,12 @@ the simulated plant that judges the result:
 Then a large-signal guard (large_signal.py): the eigenvalues describe small motions only, and a
 refined loop can still bang the rod over from the catch angle once the torque limit saturates it
 (measured on a stiffer rig, E 650 kPa: every member linearly stable, the firmware FAULTs in 0.4 s on
-the faithful plant). The refinement x is walked back, x -> step x for step in BACKTRACK, until the
-design model released from the catch angle holds; step 0 is the LQG gains.
-Deterministic: the same parameters give the same gains (no random start).
+the faithful plant). The penalty is not smooth, and where L-BFGS stops depends on rounding (a machine
+with AVX-512 and one without stop at different points from the same start): so the search is run
+again from seeded nudges of its start, up to RESTARTS times, until a refinement holds that guard
+whole. If none does, the lowest-cost one is walked back, x -> step x for step in BACKTRACK, until it
+holds; step 0 is the LQG gains.
+Deterministic on one machine: the same parameters give the same gains (the nudges are seeded).
 """
 
 from __future__ import annotations
@@ -55,6 +58,8 @@ SCALE_BOUNDS = (-0.95, 5.0)  # each gain entry may move to 0.05x .. 6x its LQG v
 # fractions of the refinement (in log-free scale space, x -> step x) tried in turn until the design
 # model released from the catch angle holds; 0 = the LQG gains, kept even if they do not
 BACKTRACK = (1.0, 0.8, 0.6, 0.4, 0.2, 0.0)
+RESTARTS = 10  # L-BFGS runs at most, until one's whole refinement holds the guard (_refine)
+NUDGE = 1e-6  # size of the deterministic nudges of the later runs' start (relative gain change) [-]
 
 
 @dataclass(frozen=True)
@@ -240,7 +245,8 @@ _MEMO: dict[str, Refined] = {}
 
 def refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refined:
     # the module's constants too: the source hash covers them as written, not as a caller (a test) sets them
-    settings = (dt, disturbance, NOMINAL_WEIGHT, MAX_ITER, NOMINAL_DECAY_WEIGHT, NOISE_WEIGHT, SCALE_BOUNDS, BACKTRACK)
+    settings = (dt, disturbance, NOMINAL_WEIGHT, MAX_ITER, NOMINAL_DECAY_WEIGHT, NOISE_WEIGHT, SCALE_BOUNDS, BACKTRACK,
+                RESTARTS, NUDGE)
     key = design_cache.key(p.sha256(), settings, (Ao, Bo, Co, Ko, Lo))
     if key not in _MEMO:
         record = design_cache.load(key)
@@ -316,17 +322,35 @@ def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refi
         grad = np.concatenate([dK[:nK] * Ko[0, :nK], dL * Lo[:, 0]]) + 2e-4 * x
         return J, grad
 
-    x0 = np.zeros(nK + nL)
-    res = minimize(cost, x0, jac=True, method="L-BFGS-B", bounds=[SCALE_BOUNDS] * len(x0),
-                   options={"maxiter": MAX_ITER})
-    x = res.x if cost(res.x)[0] <= cost(x0)[0] else x0
-    # The eigenvalues see small motions only: walk back toward the LQG gains until the design model
-    # released from the catch angle, saturated and quantized, holds (large_signal.py).
-    for step in BACKTRACK:
-        K, L = gains(step * x)
+    # The penalty is not smooth (the largest |eigenvalue| of each member, the hinge at the target), so
+    # L-BFGS stops on a kink, and which kink depends on rounding: measured on robust-matrix.toml, starts
+    # 1e-10 apart ended at costs 3.07 to 3.23, and the guard then kept 60 %, 80 % or 100 % of the
+    # refinement; a machine with AVX-512 and one without did the same from the one start. So one
+    # run is not trusted: up to RESTARTS runs, from the LQG gains and then from NUDGE-sized
+    # deterministic nudges of them, and the first whose whole refinement holds the guard is kept.
+    # The eigenvalues see small motions only: if none holds, the lowest-cost run is walked back toward
+    # the LQG gains until the design model released from the catch angle, saturated and quantized,
+    # holds (large_signal.py).
+    best = None  # (cost, run, x) of the lowest-cost run
+    for run in range(RESTARTS):
+        x0 = np.zeros(nK + nL) if run == 0 else NUDGE * np.random.default_rng(run).standard_normal(nK + nL)
+        res = minimize(cost, x0, jac=True, method="L-BFGS-B", bounds=[SCALE_BOUNDS] * len(x0),
+                       options={"maxiter": MAX_ITER})
+        x = res.x if cost(res.x)[0] <= cost(x0)[0] else x0
+        K, L = gains(x)
         release = large_signal.guard(p, dt, Ao, Bo, Co, K, L)
-        if release["holds"] or step == 0.0:
+        if release["holds"]:
+            step = BACKTRACK[0]
             break
+        if best is None or cost(x)[0] < best[0]:
+            best = (cost(x)[0], run, x, res)
+    else:
+        _, run, x, res = best
+        for step in BACKTRACK[1:]:
+            K, L = gains(step * x)
+            release = large_signal.guard(p, dt, Ao, Bo, Co, K, L)
+            if release["holds"] or step == 0.0:
+                break
     names = [mb.name for mb in members]
     return Refined(K[:, :nK], L[:nK], float(L[nK, 0]) if disturbance else 0.0,
                    dict(zip(names, radii(members, Ao, Bo, Co, K, L).tolist())),

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
+import math
 import sys
 import time
 from pathlib import Path
@@ -22,6 +23,15 @@ REST_TIMEOUT_S = 20.0
 # sim:// on rig A, 4 s left enough sway to put the viscous friction -5.7 % off, 15 s -0.9 %.
 SETTLE_S = 15.0
 END_MARGIN_S = 3.0  # beyond the experiment's duration before the host gives up waiting
+# The default amplitudes are sized for the nominal rig; a livelier one (softer rod, less back-EMF
+# damping) can swing a chirp into the firmware's 60 deg limit and FAULT: 1 of 30 random rigs, whose
+# steps also reached 56 deg, while the other 29 stayed within 46 deg in every experiment. The host
+# stops an experiment (DISARM, no FAULT) once the swing passes this fraction of the firmware's angle
+# or speed limit (48 deg, 32 rad/s), and plays it again RETRY_SCALE times smaller, at most MAX_TRIES
+# times in all.
+SOFT_LIMIT_FRACTION = 0.8
+RETRY_SCALE = 0.7
+MAX_TRIES = 3
 
 
 def _nominal(args, meta: dict | None = None):
@@ -78,8 +88,43 @@ def _wait_rest(session, settle: float = 0.0) -> None:
     raise UserError(f"the rod did not come to rest within {REST_TIMEOUT_S:g} s (|base rate| < {REST_RATE_RAD_S} rad/s)")
 
 
-def run_experiment(session, exp, log_path: Path, params, params_source: str):
-    """Play one experiment while logging every frame; returns (log path, final telemetry)."""
+class SwingWatch:
+    """Session listener: the largest swing from hanging [rad] and base speed [rad/s] seen in
+    IDENTIFY telemetry, and whether either passed its soft limit (every frame, not only the
+    ones the polling loop happens to read)."""
+
+    def __init__(self, params, fraction: float = SOFT_LIMIT_FRACTION):
+        """fraction: of the firmware's limits [-]; 1 watches without ever stopping (the firmware trips first)."""
+        from rodctl.link import protocol as P
+
+        self._telemetry, self._identify = P.MsgType.TELEMETRY, P.Mode.IDENTIFY
+        self.rad_per_count = params.rad_per_count
+        self.fraction = fraction
+        self.angle_soft_rad = fraction * math.radians(params["safety"]["angle_limit_deg"])
+        self.speed_soft_rad_s = fraction * params["safety"]["speed_limit"]
+        self.angle_rad = 0.0
+        self.speed_rad_s = 0.0
+        self.over = ""  # what passed its soft limit first ("" while nothing has)
+
+    def __call__(self, frame, _host_time_s) -> None:
+        if frame.type != self._telemetry or frame.msg.mode != self._identify:
+            return
+        # the firmware's angle from hanging: the count wrapped to one output turn
+        a = abs(math.remainder(frame.msg.encoder_count * self.rad_per_count, 2.0 * math.pi))
+        w = abs(frame.msg.base_rate)
+        self.angle_rad, self.speed_rad_s = max(self.angle_rad, a), max(self.speed_rad_s, w)
+        if self.fraction >= 1.0:
+            return
+        if not self.over and a > self.angle_soft_rad:
+            self.over = f"swung {math.degrees(a):.0f} deg from hanging (soft limit {math.degrees(self.angle_soft_rad):.0f} deg)"
+        elif not self.over and w > self.speed_soft_rad_s:
+            self.over = f"reached {w:.1f} rad/s (soft limit {self.speed_soft_rad_s:.1f} rad/s)"
+
+
+def run_experiment(session, exp, log_path: Path, params, params_source: str, watch: SwingWatch | None = None):
+    """Play one experiment while logging every frame; returns (log path, final telemetry). With a
+    `watch`, the experiment is stopped (DISARM) as soon as watch.over says the swing passed its soft
+    limit."""
     from rodctl.link import protocol as P
     from rodctl.logs import LogWriter, device_metadata
 
@@ -87,6 +132,8 @@ def run_experiment(session, exp, log_path: Path, params, params_source: str):
                            start_unix=session.open_unix)
     writer = LogWriter(log_path, meta, n=session.hello.n)
     session.add_listener(writer, replay=False)
+    if watch is not None:
+        session.add_listener(watch, replay=False)
     ended = "error"
     try:
         session.command(exp.command(), what=f"identify {exp.name}")
@@ -95,8 +142,13 @@ def run_experiment(session, exp, log_path: Path, params, params_source: str):
         started = time.monotonic()
         seen = False  # telemetry queued before the ACK still shows DISARMED: wait for IDENTIFY first
         while time.monotonic() < deadline:
-            time.sleep(0.05)
+            time.sleep(0.01)
             session.check()
+            if watch is not None and watch.over:
+                session.disarm()
+                ended = "stopped: " + watch.over
+                time.sleep(0.1)  # the frames already on their way
+                return log_path, session.telemetry
             writer.maybe_flush()  # rows reach the file while the rod moves: a crash keeps them
             last = session.telemetry
             if last is None:
@@ -111,11 +163,13 @@ def run_experiment(session, exp, log_path: Path, params, params_source: str):
         ended = "fault" if last.mode == P.Mode.FAULT else "done"
         return log_path, last
     finally:
-        if ended != "done":
+        if ended != "done" and not ended.startswith("stopped"):
             try:
                 session.disarm()
             except UserError:
                 pass
+        if watch is not None:
+            session.remove_listener(watch)
         session.remove_listener(writer)
         writer.close({"end": ended, "experiment": exp.describe()})
 
@@ -128,6 +182,8 @@ def run_port(args) -> int:
 
     if not 0 < args.scale <= 4:
         raise InputError(f"--scale must be in (0, 4], got {args.scale:g}")
+    if not 0 < args.soft_limit <= 1:
+        raise InputError(f"--soft-limit must be in (0, 1], got {args.soft_limit:g}")
     exps = [e.scaled(torque=args.scale) for e in E.select(args.experiment)]
     check_output(args.out, "--out", force=args.force)
     log_dir = Path(args.log_dir)
@@ -144,18 +200,34 @@ def run_port(args) -> int:
         print(f"identify: {session.port}, firmware N={h.n} at {1e6 / h.period_us:g} Hz; nominal parameters: {source}",
               file=sys.stderr)
         for i, exp in enumerate(exps, 1):
-            _wait_rest(session, args.settle if i > 1 else 0.0)
-            _confirm(args, f"[{i}/{len(exps)}] {exp.describe()}")
-            path = log_dir / f"identify-{stamp}-{exp.name}.csv"
-            path, last = run_experiment(session, exp, path, params, source)
+            for attempt in range(1, MAX_TRIES + 1):
+                _wait_rest(session, args.settle if i > 1 or attempt > 1 else 0.0)
+                _confirm(args, f"[{i}/{len(exps)}] {exp.describe()}")
+                path = log_dir / f"identify-{stamp}-{exp.name}{'' if attempt == 1 else f'-{attempt}'}.csv"
+                watch = SwingWatch(params, args.soft_limit)
+                path, last = run_experiment(session, exp, path, params, source, watch)
+                if last.mode == P.Mode.FAULT:
+                    # a livelier rig than the amplitudes were sized for (softer rod, weaker back-EMF damping)
+                    hint = (f"; for smaller swings: --scale {RETRY_SCALE * args.scale:.2g}"
+                            if last.reason in (P.Reason.ANGLE_LIMIT, P.Reason.SPEED_LIMIT) else "")
+                    raise UserError(f"{exp.name}: safety limit tripped: {reason_text(last.reason)} "
+                                    f"({P.Reason(last.reason).name}); the motor is stopped (FAULT); log kept: "
+                                    f"{path}{hint}")
+                if not watch.over:
+                    break
+                # the stopped run's log stays on disk (it is a clean record), but the fit takes the
+                # complete run: the amplitudes were chosen to excite every parameter for its whole length
+                smaller = exp.scaled(torque=RETRY_SCALE)
+                if attempt == MAX_TRIES:
+                    raise UserError(f"{exp.name}: {watch.over} at {exp.amplitude * 1e3:.3g} mN m, after "
+                                    f"{MAX_TRIES} tries; motor stopped; logs kept in {log_dir}; "
+                                    f"for smaller swings: --scale {args.scale * RETRY_SCALE ** MAX_TRIES:.2g}")
+                print(f"  stopped: {watch.over}; log kept: {path}; playing it again at "
+                      f"{smaller.amplitude * 1e3:.3g} mN m ({RETRY_SCALE:g} x)", file=sys.stderr, flush=True)
+                exp = smaller
             logs.append(path)
-            if last.mode == P.Mode.FAULT:
-                # a livelier rig than the amplitudes were sized for (softer rod, weaker back-EMF damping)
-                hint = (f"; for smaller swings: --scale {0.7 * args.scale:.2g}"
-                        if last.reason in (P.Reason.ANGLE_LIMIT, P.Reason.SPEED_LIMIT) else "")
-                raise UserError(f"{exp.name}: safety limit tripped: {reason_text(last.reason)} "
-                                f"({P.Reason(last.reason).name}); the motor is stopped (FAULT); log kept: {path}{hint}")
-            print(f"  done: {path}", file=sys.stderr, flush=True)
+            print(f"  done: {path} (largest swing {math.degrees(watch.angle_rad):.0f} deg from hanging, "
+                  f"{watch.speed_rad_s:.1f} rad/s)", file=sys.stderr, flush=True)
     return fit_logs(args, logs, params, source)
 
 
@@ -267,6 +339,10 @@ def register(sub) -> None:
                    help=f"wait S seconds between experiments for the rod's swing to die out (default {SETTLE_S:g})")
     p.add_argument("--scale", type=float, default=1.0, metavar="X",
                    help="multiply every experiment's torque amplitude (default 1: sized for the Table I rod)")
+    p.add_argument("--soft-limit", type=float, default=SOFT_LIMIT_FRACTION, metavar="F",
+                   help=f"stop an experiment once the swing passes F x the firmware's angle or speed limit and play "
+                        f"it again {RETRY_SCALE:g} x smaller, up to {MAX_TRIES} tries (default {SOFT_LIMIT_FRACTION:g}: "
+                        f"48 deg, 32 rad/s; 1: only the firmware's own limits, which FAULT)")
     p.add_argument("--starts", type=int, default=3, metavar="N", help="optimizer starts (default 3)")
     p.add_argument("--exact-plant", action="store_true",
                    help="run every start on the parameter file's [plant] as is (a DER plant: ~5x slower); "
