@@ -331,7 +331,7 @@ def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refi
     # The eigenvalues see small motions only: if none holds, the lowest-cost run is walked back toward
     # the LQG gains until the design model released from the catch angle, saturated and quantized,
     # holds (large_signal.py).
-    best = None  # (cost, run, x) of the lowest-cost run
+    best = None  # (cost, run, x, L-BFGS result) of the lowest-cost run
     for run in range(RESTARTS):
         x0 = np.zeros(nK + nL) if run == 0 else NUDGE * np.random.default_rng(run).standard_normal(nK + nL)
         res = minimize(cost, x0, jac=True, method="L-BFGS-B", bounds=[SCALE_BOUNDS] * len(x0),

@@ -342,7 +342,7 @@ def register(sub) -> None:
     p.add_argument("--soft-limit", type=float, default=SOFT_LIMIT_FRACTION, metavar="F",
                    help=f"stop an experiment once the swing passes F x the firmware's angle or speed limit and play "
                         f"it again {RETRY_SCALE:g} x smaller, up to {MAX_TRIES} tries (default {SOFT_LIMIT_FRACTION:g}: "
-                        f"48 deg, 32 rad/s; 1: only the firmware's own limits, which FAULT)")
+                        f"48 deg and 32 rad/s with the default limits; 1: only the firmware's own limits, which FAULT)")
     p.add_argument("--starts", type=int, default=3, metavar="N", help="optimizer starts (default 3)")
     p.add_argument("--exact-plant", action="store_true",
                    help="run every start on the parameter file's [plant] as is (a DER plant: ~5x slower); "
