@@ -184,7 +184,7 @@ def stiff_guarded():
 
 def _runs_seen(monkeypatch, holds):
     """Run the refinement of robust-matrix.toml afresh with 3 restarts and a fake guard: holds(call
-    number, K) decides. Returns (design, [(cost of each L-BFGS run, its full K)], [K the guard saw])."""
+    number, K) decides. Returns (design, [(cost of each L-BFGS run, its gain scales x)], [K the guard saw])."""
     import numpy as np
     from rodgains import design_cache, large_signal
     from rodgains import robust_design as R

@@ -331,21 +331,22 @@ def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refi
     # The eigenvalues see small motions only: if none holds, the lowest-cost run is walked back toward
     # the LQG gains until the design model released from the catch angle, saturated and quantized,
     # holds (large_signal.py).
-    best = None  # (cost, run, x, L-BFGS result) of the lowest-cost run
+    best = None  # (cost, x, L-BFGS result) of the lowest-cost run
     for run in range(RESTARTS):
         x0 = np.zeros(nK + nL) if run == 0 else NUDGE * np.random.default_rng(run).standard_normal(nK + nL)
         res = minimize(cost, x0, jac=True, method="L-BFGS-B", bounds=[SCALE_BOUNDS] * len(x0),
                        options={"maxiter": MAX_ITER})
-        x = res.x if cost(res.x)[0] <= cost(x0)[0] else x0
+        c0 = cost(x0)[0]
+        x, c = (res.x, res.fun) if res.fun <= c0 else (x0, c0)  # res.fun is the cost at res.x
         K, L = gains(x)
         release = large_signal.guard(p, dt, Ao, Bo, Co, K, L)
         if release["holds"]:
             step = BACKTRACK[0]
             break
-        if best is None or cost(x)[0] < best[0]:
-            best = (cost(x)[0], run, x, res)
+        if best is None or c < best[0]:
+            best = (c, x, res)
     else:
-        _, run, x, res = best
+        _, x, res = best
         for step in BACKTRACK[1:]:
             K, L = gains(step * x)
             release = large_signal.guard(p, dt, Ao, Bo, Co, K, L)

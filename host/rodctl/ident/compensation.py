@@ -53,10 +53,12 @@ class Candidate:
 
     def line(self) -> str:
         miss = f"; fails {', '.join(self.failed)}" if self.failed else ""
-        margin = (f"nominal goals met with {self.margin_s:.2f} s to spare" if self.margin_s >= 0
-                  else "a nominal goal missed")
-        if math.isinf(self.margin_s) and self.margin_s > 0:
+        if self.margin_s == math.inf:
             margin = "no nominal run"
+        elif self.margin_s >= 0:
+            margin = f"nominal goals met with {self.margin_s:.2f} s to spare"
+        else:
+            margin = "a nominal goal missed"
         own = " (the nominal file's)" if self.nominal else ""
         return (f"{self.ratio:.3g} x = {1e3 * self.torque_nm:.2f} mN m{own}: {self.passed}/{self.runs} passed, "
                 f"{margin}{miss}")
