@@ -262,6 +262,8 @@ def test_report_lists_critical_lengths_margins_and_the_sampled_paper_gain():
     assert r.returncode == 0, r.stderr
     out = r.stdout
     assert "continuum (Greenhill, corrected eq. 23): 15.40 cm" in out
+    assert ("above the plant's 10 mm hub: 14.50 cm = 0.941 x continuum, clamped at the hub; it buckles there at "
+            "E -16.6 %, rho +19.9 % or length +5.8 %") in out
     assert "N = 5 link model:" in out and "16.97 cm" in out
     assert "phase margin" in out and "stable for actuator gain in" in out
     line = [x for x in out.splitlines() if "bare rod of Table I" in x][0]

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from rodgains.buckling import bessel_zero_minus_third, greenhill_length, nlink_critical_length
+from rodgains.buckling import (bessel_zero_minus_third, buckling_margins, clamped_ratio, greenhill_length,
+                               nlink_critical_length)
 from rodgains.der_model import DERModel
 from rodgains.linearize import linearize_upright, numerical_jacobian, paper_Ab, paper_Ag, paper_linearization
 from rodgains.params import load_params
@@ -92,6 +93,20 @@ def test_greenhill_length_for_table_I_is_154_mm():
     assert greenhill_length(p) == pytest.approx(0.154, abs=0.001)
     # the paper's printed eq. (23) (factors swapped) would give 0.158 m only by its own misprint
     assert greenhill_length(p) < 0.155  # so the Table I rod is just beyond the continuum limit
+
+
+def test_the_rod_above_the_hub_reaches_its_clamped_buckling_length_at_the_margins():
+    """Table I's rod: 14.5 cm above the 10 mm hub against Greenhill's 15.40 cm, so 0.941 x. Each margin alone
+    (E -16.6 %, rho +19.9 %, length +5.8 %) brings that ratio to exactly 1."""
+    p = load_params()
+    assert clamped_ratio(p) == pytest.approx(0.145 / greenhill_length(p), rel=1e-12)
+    assert clamped_ratio(p) == pytest.approx(0.9413, abs=1e-4)
+    m = buckling_margins(p)
+    assert (m["youngs_modulus"], m["density"], m["length"]) == pytest.approx((-0.166, 0.199, 0.058), abs=1e-3)
+    for key in ("youngs_modulus", "density", "length"):
+        edge = p.with_overrides(f"rod.{key}={p['rod'][key] * (1 + m[key])!r}")
+        assert clamped_ratio(edge) == pytest.approx(1.0, abs=1e-9), key
+    assert clamped_ratio(p.with_overrides("rod.gravity=0.0")) == 0.0  # nothing buckles without weight
 
 
 def test_nlink_critical_length_converges_to_continuum():

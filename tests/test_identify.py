@@ -282,3 +282,15 @@ def test_a_case_the_default_design_drops_on_a_hidden_rig_holds_with_the_identifi
     mine = run_case(_identified("C", tmp_path), CASES["damping*10"], "balance", plant_params=hidden)
     assert default["fault_reason"] != 0 and not default["passed"], default
     assert mine["passed"] and mine["fault_reason"] == 0 and mine["final_dev_deg"] < SETTLE_DEG, mine
+
+
+def test_identify_says_how_far_the_identified_rod_is_from_buckling(tmp_path):
+    """Rig B's rod above the hub is 0.98 x its clamped buckling length; rig A's 0.91 x, and no matrix case
+    takes A past it."""
+    from rodctl.cli.identify import buckling_line
+
+    b = buckling_line(_identified("B", tmp_path)).splitlines()
+    assert b[0].startswith("buckling: the rod above the hub is 0.98") and "it reaches 1 at E -" in b[0]
+    assert "past it in the robustness matrix: E-15 1.03" in b[1] and "rho+15" in b[1] and "L+3" in b[1]
+    a = buckling_line(_identified("A", tmp_path)).splitlines()
+    assert len(a) == 1 and a[0].startswith("buckling: the rod above the hub is 0.91")

@@ -10,6 +10,8 @@ i.e. 7.837 E I / (rho g A) = 3 E h^2 B^2 / (16 rho g) for a rectangular section.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import scipy.linalg as sla
 from scipy.optimize import brentq
@@ -48,3 +50,33 @@ def nlink_critical_length(p: Params, edges: int | None = None) -> float:
     lam = sla.eigh(rod.laplacian[1:, 1:], np.diag(rod.mass_below[1:]), eigvals_only=True)[0]
     rhoAg = r["density"] * r["width"] * r["thickness"] * r["gravity"]
     return float((lam * p.EI * N**3 / rhoAg) ** (1 / 3))
+
+
+def clamped_ratio(p: Params) -> float:
+    """The rod above the hub over its clamped self-buckling (Greenhill) length [-].
+
+    The plant's hub (plant.hub_length) sits rigid in the shaft, so what can buckle is the rod above
+    it, clamped at the hub. Past 1 that rod buckles under its own weight whenever the shaft holds
+    still, and the only way to keep it straight is to move the shaft under it, which the encoder
+    sees only after the rod has bent (README "System identification": three stiff-shaft designs held
+    no run from 1.007 on)."""
+    lc = greenhill_length(p)
+    return (p["rod"]["length"] - p["plant"]["hub_length"]) / lc if math.isfinite(lc) else 0.0
+
+
+def buckling_margins(p: Params) -> dict[str, float]:
+    """The relative change of rod.youngs_modulus, rod.density or rod.length (the whole rod, hub
+    included) alone that brings clamped_ratio to 1 [-]: negative for a drop. Greenhill's length
+    goes as (E / rho)^(1/3). Without gravity nothing buckles: +-inf."""
+    r = clamped_ratio(p)
+    if r <= 0.0:
+        return {"youngs_modulus": -math.inf, "density": math.inf, "length": math.inf}
+    hub, length = p["plant"]["hub_length"], p["rod"]["length"]
+    return {"youngs_modulus": r**3 - 1.0, "density": r**-3 - 1.0,
+            "length": (greenhill_length(p) + hub) / length - 1.0}
+
+
+def margins_text(p: Params) -> str:
+    """buckling_margins in words: "E -4.9 %, rho +5.1 % or length +1.6 %"."""
+    m = buckling_margins(p)
+    return f"E {100 * m['youngs_modulus']:+.1f} %, rho {100 * m['density']:+.1f} % or length {100 * m['length']:+.1f} %"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import sampled
-from .buckling import greenhill_length, nlink_critical_length
+from .buckling import clamped_ratio, greenhill_length, margins_text, nlink_critical_length
 from .design import Design, continuous_gains, weights
 from .linearize import linearize_upright
 from .params import SOFT_SHAFT_WEIGHTS
@@ -96,6 +96,18 @@ def _stiff_shaft_note(p, ratio: float) -> list[str]:
             f"docs/tuned/low-ripple.toml ({', '.join(SOFT_SHAFT_WEIGHTS)}; README, longest rod)"]
 
 
+def _clamped_line(p) -> str:
+    """The rod above the plant's hub against its clamped buckling length, and what takes it there."""
+    hub, ratio = p["plant"]["hub_length"], clamped_ratio(p)
+    head = (f"  above the plant's {hub * 1e3:g} mm hub: {(p['rod']['length'] - hub) * 100:.2f} cm = {ratio:.3f} x continuum, "
+            f"clamped at the hub")
+    if ratio >= 1.0:
+        return head + ": it buckles whenever the shaft holds still"
+    if ratio == 0.0:
+        return head + ": without gravity it cannot buckle"
+    return f"{head}; it buckles there at {margins_text(p)}"
+
+
 def report_text(d: Design) -> str:
     p = d.params
     rod = d.rod
@@ -124,6 +136,7 @@ def report_text(d: Design) -> str:
         f"  continuum (Greenhill, corrected eq. 23): {lc_cont * 100:.2f} cm",
         f"  N = {rod.N} link model:                    {lc_model * 100:.2f} cm",
         f"  this rod: {L_tot * 100:.2f} cm = {L_tot / lc_cont:.3f} x continuum, {L_tot / lc_model:.3f} x model",
+        _clamped_line(p),
         *_stiff_shaft_note(p, L_tot / lc_cont),
         "",
         f"Open loop about upright: unstable poles {', '.join(f'{v:.3g}' for v in unstable) or 'none'} rad/s; "

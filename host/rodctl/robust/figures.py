@@ -18,6 +18,7 @@ HEAT_METRICS = (
     ("caught_at_s", "caught [s]", 2),
     ("base_turns_max", "base turns", 2),
     ("est_rms_deg", "est. error [deg]", 2),
+    ("buckling_ratio", "rod / buckling length", 3),  # past 1: a still shaft cannot hold it (rodgains.buckling)
 )
 
 
@@ -76,7 +77,8 @@ def heatmap(rows: list[dict], path: Path, title: str) -> Path:
         ax.set_xticks(np.arange(len(cols) + 1) + 0.5)
         ax.set_xticklabels(["result"] + [c[1] for c in cols], rotation=35, ha="right", fontsize=7)
         ax.set_yticks(np.arange(len(sub)) + 0.5)
-        ax.set_yticklabels([r["case"] for r in sub], fontsize=7)
+        ax.set_yticklabels([r["case"] + (" ^" if (r.get("buckling_ratio") or 0.0) >= 1.0 else "") for r in sub],
+                           fontsize=7)
         ax.tick_params(length=0)
         n_pass = sum(1 for r in sub if r.get("passed"))
         ax.set_title(f"{task}: {n_pass}/{len(sub)} pass", fontsize=9)
