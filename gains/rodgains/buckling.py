@@ -72,8 +72,8 @@ def buckling_margins(p: Params) -> dict[str, float]:
     if r <= 0.0:
         return {"youngs_modulus": -math.inf, "density": math.inf, "length": math.inf}
     hub, length = p["plant"]["hub_length"], p["rod"]["length"]
-    return {"youngs_modulus": r**3 - 1.0, "density": r**-3 - 1.0,
-            "length": (greenhill_length(p) + hub) / length - 1.0}
+    critical = (length - hub) / r  # Greenhill's length, from the ratio
+    return {"youngs_modulus": r**3 - 1.0, "density": r**-3 - 1.0, "length": (critical + hub) / length - 1.0}
 
 
 def margins_text(p: Params) -> str:

@@ -52,7 +52,7 @@ def _fmt(v, nd=2) -> str:
 
 def table_lines(rows: list[dict]) -> list[str]:
     """A line per case (both tasks side by side); Monte Carlo plants summed up at the end."""
-    from rodctl.sim.matrix import TASKS
+    from rodctl.sim.matrix import TASKS, buckled
 
     def cell(r):
         if r is None:
@@ -64,13 +64,13 @@ def table_lines(rows: list[dict]) -> list[str]:
     for r in rows:
         if r.get("kind") != "draw":
             by.setdefault(r["case"], {})[r["task"]] = r
-    ratio = {name: max((r.get("buckling_ratio") or 0.0) for r in d.values()) for name, d in by.items()}
+    past = {name: r["buckling_ratio"] for name, d in by.items() for r in d.values() if buckled(r)}
     lines = [f"  {'':14s}" + "".join(f" | {t:^28s}" for t in TASKS),
              f"  {'case':14s}" + "".join(f" | {'settle s':>9s} {'end deg':>9s} {'result':>8s}" for _ in TASKS)]
     for name, d in by.items():
-        lines.append(f"  {name + (' ^' if ratio[name] >= 1.0 else ''):14s}" + "".join(f" | {cell(d.get(t))}" for t in TASKS))
+        lines.append(f"  {name + (' ^' if name in past else ''):14s}" + "".join(f" | {cell(d.get(t))}" for t in TASKS))
     draws = [r for r in rows if r.get("kind") == "draw"]
-    buckled = len({r["draw"] for r in draws if (r.get("buckling_ratio") or 0.0) >= 1.0})
+    buckled_draws = len({r["draw"] for r in draws if buckled(r)})
     if draws:
         parts = []
         for t in TASKS:
@@ -78,11 +78,11 @@ def table_lines(rows: list[dict]) -> list[str]:
             parts.append(f"{t} {sum(1 for r in sub if r.get('passed'))}/{len(sub)} pass")
         n = len({r["draw"] for r in draws})
         lines.append(f"  Monte Carlo plants ({n}): " + ", ".join(parts)
-                     + (f"; {buckled} past the buckling length" if buckled else ""))
-    past = [f"{name} {v:.3f} x" for name, v in ratio.items() if v >= 1.0]
-    if past or buckled:
+                     + (f"; {buckled_draws} past the buckling length" if buckled_draws else ""))
+    if past or buckled_draws:
+        which = f" ({', '.join(f'{name} {v:.3f} x' for name, v in past.items())})" if past else ""
         lines.append("  ^ past the buckling length: the rod above the hub is longer than Greenhill's clamped length"
-                     + (f" ({', '.join(past)})" if past else "") + ", so it bends over whenever the shaft holds still "
+                     + which + ", so it bends over whenever the shaft holds still "
                      "(rodctl gains --report; README \"System identification\")")
     return lines
 

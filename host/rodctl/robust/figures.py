@@ -43,6 +43,8 @@ def heatmap(rows: list[dict], path: Path, title: str) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from rodctl.sim.matrix import buckled
+
     tasks = list(dict.fromkeys(r["task"] for r in rows))
     height = max(len([r for r in rows if r["task"] == t]) for t in tasks)
     # constrained layout: tight_layout cannot fit the rotated labels of a short matrix and warns
@@ -77,8 +79,7 @@ def heatmap(rows: list[dict], path: Path, title: str) -> Path:
         ax.set_xticks(np.arange(len(cols) + 1) + 0.5)
         ax.set_xticklabels(["result"] + [c[1] for c in cols], rotation=35, ha="right", fontsize=7)
         ax.set_yticks(np.arange(len(sub)) + 0.5)
-        ax.set_yticklabels([r["case"] + (" ^" if (r.get("buckling_ratio") or 0.0) >= 1.0 else "") for r in sub],
-                           fontsize=7)
+        ax.set_yticklabels([r["case"] + (" ^" if buckled(r) else "") for r in sub], fontsize=7)
         ax.tick_params(length=0)
         n_pass = sum(1 for r in sub if r.get("passed"))
         ax.set_title(f"{task}: {n_pass}/{len(sub)} pass", fontsize=9)

@@ -170,6 +170,12 @@ def buckled_cases(plant: Params) -> dict[str, float]:
     return out
 
 
+def buckled(row: dict) -> bool:
+    """Was this run's rod past its clamped buckling length (run_case's buckling_ratio >= 1)? A refused
+    design's row has no ratio."""
+    return (row.get("buckling_ratio") or 0.0) >= 1.0
+
+
 def _deviation_deg(theta: np.ndarray) -> np.ndarray:
     return np.degrees(np.abs(np.mod(theta, 2 * np.pi) - np.pi))
 
