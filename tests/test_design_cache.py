@@ -36,7 +36,7 @@ def cache(tmp_path, monkeypatch):
         n = Ko.shape[1] - 1
         scale = 1.0 + 0.01 * rng.standard_normal(n)  # full float64 mantissas, as a real refinement gives
         return R.Refined(Ko[:, :n] * scale, Lo[:n] * 1.0, float(Lo[n, 0]) / 3.0, {"N=8 damping x1": 0.99712345678},
-                         {"N=8 damping x1": 0.998}, 17, 0.8,
+                         {"N=8 damping x1": 0.998}, 10, 7, 0.8,
                          {"holds": True, "runs": {"nominal": {"fell": False, "fell_at_s": None,
                                                               "final_deg": 0.123456789, "holds": True}}})
 
@@ -59,7 +59,7 @@ def test_a_second_process_gets_the_same_gains_without_refining(cache, monkeypatc
     K2, L2, Lw2 = _gains(d)
     assert len(calls) == 1  # served from disk
     assert np.array_equal(K1, K2) and np.array_equal(L1, L2) and Lw1 == Lw2  # bit-identical
-    assert d.checks["robust_step"] == 0.8
+    assert d.checks["robust_step"] == 0.8 and d.checks["robust_runs"] == [7, 10]
     assert d.checks["robust_release"]["runs"]["nominal"]["final_deg"] == 0.123456789
     assert not list(folder.glob("*.tmp"))  # no half-written file left behind
 
@@ -91,7 +91,7 @@ def test_a_corrupt_entry_is_designed_anew_and_replaced(cache, monkeypatch, damag
     entry.write_text({"not json": "{ half a record",
                       "another key": json.dumps(dict(json.loads(entry.read_text()), key="0" * 64)),
                       "wrong shape": json.dumps({"key": entry.stem, "K": [[1.0, 2.0]], "L": [[1.0]], "Lw": 0.0,
-                                                 "radii": {}, "radii_lqg": {}, "iterations": 1, "step": 1.0,
+                                                 "radii": {}, "radii_lqg": {}, "runs": 1, "agree": 1, "step": 1.0,
                                                  "release": None})}[damage])
     monkeypatch.setattr(R, "_MEMO", {})
     K2, _, _ = _gains(design(p))

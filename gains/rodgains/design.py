@@ -240,6 +240,7 @@ def design(p: Params) -> Design:
         checks["robust_family_radii"] = ref.radii
         checks["robust_family_radii_lqg"] = ref.radii_lqg
         checks["robust_step"] = ref.step
+        checks["robust_runs"] = [ref.agree, ref.runs]
         checks["robust_release"] = ref.release
     rho = sampled.spectral_radius(d.loop())
     checks["closed_loop_spectral_radius"] = rho

@@ -171,8 +171,9 @@ def report_text(d: Design) -> str:
     if fam:
         lqg = d.checks["robust_family_radii_lqg"]
         target = d.params["design"]["robust_radius"]
-        lines += ["", f"Robust refinement (design.method = robust): spectral radius on the design's model family, "
-                      f"LQG -> refined (target {target:g}):"]
+        agree, runs = d.checks.get("robust_runs", (1, 1))
+        lines += ["", f"Robust refinement (design.method = robust): the design {agree} of {runs} L-BFGS runs reached; "
+                      f"spectral radius on the design's model family, LQG -> refined (target {target:g}):"]
         lines += [f"  {name:28s} {lqg[name]:.5f} -> {r:.5f}" + ("  <- above target" if r > target + 1e-6 else "")
                   for name, r in fam.items()]
         guard = d.checks.get("robust_release")
