@@ -1,7 +1,7 @@
 """The robust refinement's on-disk cache (gains/rodgains/design_cache.py).
 
 What a user notices: the second `rodctl` command that needs a robust design starts in a fraction
-of a second instead of about 6 s, with the very same gains; a changed parameter is designed anew;
+of a second instead of about 25 s, with the very same gains; a changed parameter is designed anew;
 a broken or read-only cache never stops a design. The refinement itself is faked here (its result
 is what the cache must carry, not how it is computed; tests/test_robust_design.py runs it).
 """

@@ -201,7 +201,7 @@ def _restarts(monkeypatch, ends, holds, restarts):
     def minimize(fun, x0, **kw):
         cost, scale = ends[len(made)]
         made.append(cost)
-        return SimpleNamespace(x=np.full(x0.size, scale), fun=cost, nit=1)  # cost below the LQG gains' 3.3
+        return SimpleNamespace(x=np.full(x0.size, scale), fun=cost)  # cost below the LQG gains' 3.3
 
     def guard(p, dt, Ao, Bo, Co, K, L):
         calls.append(1)
@@ -252,7 +252,7 @@ def test_when_no_design_holds_the_one_most_runs_reach_is_walked_back(monkeypatch
 def test_rounding_sized_nudges_of_every_start_keep_the_same_design(monkeypatch):
     """Another machine's rounding, as a 1e-10 nudge of every L-BFGS start (seeded): of the runs on
     robust-matrix.toml with these nudges, one stops at another design that also holds the guard
-    (cost 3.08 against 3.23, measured), the rest at this machine's. The design kept is the same:
+    (cost 3.08 against 3.23, measured) and others on kinks that fail it. The design kept is the same:
     gains within 1e-3, the same 61 Hz least-damped mode (its ringing is what the report warns of)."""
     import numpy as np
     from rodgains import design_cache

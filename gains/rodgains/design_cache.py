@@ -1,7 +1,7 @@
 """On-disk cache of the robust refinement, the only part of a design that takes seconds.
 
 Why: `design.method = "robust"` refines the LQG gains over a family of rods and releases them
-from the catch angle (robust_design.py, large_signal.py): about 6 s. Every `rodctl` command that
+from the catch angle (robust_design.py, large_signal.py): about 25 s. Every `rodctl` command that
 needs gains (sim, log --port sim://, the SIL build, the header check) would pay that again in
 each new process. The result depends only on its inputs, so it is stored once per input.
 
