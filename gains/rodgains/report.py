@@ -171,7 +171,7 @@ def report_text(d: Design) -> str:
     if fam:
         lqg = d.checks["robust_family_radii_lqg"]
         target = d.params["design"]["robust_radius"]
-        agree, runs = d.checks.get("robust_runs", (1, 1))
+        agree, runs = d.checks["robust_runs"]
         lines += ["", f"Robust refinement (design.method = robust): the design {agree} of {runs} L-BFGS runs reached; "
                       f"spectral radius on the design's model family, LQG -> refined (target {target:g}):"]
         lines += [f"  {name:28s} {lqg[name]:.5f} -> {r:.5f}" + ("  <- above target" if r > target + 1e-6 else "")
