@@ -1,8 +1,10 @@
 """rodctl identify chooses the dry-friction compensation for the identified rig by the robustness matrix:
-the ranking, the file it writes, and rig A, whose nominal balance the nominal file's 7.4 mN m misses."""
+the ranking, the second stage with a stiffer shaft, the file it writes, and rig A, whose nominal balance
+the nominal file's 7.4 mN m misses."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import pytest
@@ -29,10 +31,98 @@ def test_ranking_takes_the_most_passes_then_the_widest_nominal_margin_then_the_d
     assert cands[2].margin_s == pytest.approx(0.6)  # min(1.5 - 0.9, 2.0 - 1.2)
     best = max(cands, key=C.rank_key)
     assert best.ratio == 1.4  # ties with 2.0 on passes and margin; nearer the default 1.5 x
+    stiff = C.candidate(1.5, 1e-3, good, shaft_weight=400.0)
+    assert max(cands + [stiff], key=C.rank_key) is best  # an equal result keeps the file's own shaft weight
+
+
+class _FakeRunner:
+    """Stands in for the process pool: every run passes except where `fails(params, case)` says not.
+    Records the (compensation ratio, shaft weight) of every design it was given."""
+
+    def __init__(self, fails, seen):
+        self.fails, self.seen = fails, seen
+
+    def __call__(self, **_):
+        return self
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return None
+
+    def run(self, units, desc=""):
+        rows = []
+        for u in units:
+            lqr = json.loads(u.params_json)["lqr"]
+            self.seen.add((round(lqr["friction_compensation"] / 0.005, 3), lqr["q_shaft_angle"]))
+            passed = not self.fails(lqr, u.case.name, u.task)
+            rows.append({"case": u.case.name, "task": u.task, "passed": passed, "settle_s": 0.5 if passed else None})
+        return rows
+
+
+def _choose_with(monkeypatch, fails):
+    import rodctl.robust.execute as X
+
+    seen, said = set(), []
+    monkeypatch.setattr(X, "Runner", _FakeRunner(fails, seen))
+    p = load_params(None, ["motor.coulomb_friction=0.005"])
+    return C.choose(p, cases="matrix", say=said.append), seen, said
+
+
+def test_a_stiffer_shaft_is_tried_only_when_no_compensation_passes_every_run(monkeypatch):
+    """A rod ten times more damped falls at the file's shaft weight (325) whatever the compensation: the
+    second stage judges every ratio again at 400 and keeps the one that passes all runs. Where some
+    compensation already passes, 400 is never run."""
+    drops_damped = lambda lqr, case, task: case == "damping*10" and lqr["q_shaft_angle"] < 400  # noqa: E731
+    choice, seen, said = _choose_with(monkeypatch, drops_damped)
+    assert choice.best.shaft_weight == 400.0 and choice.best.passed == choice.best.runs
+    assert choice.best.ratio == 1.5  # every ratio passes at 400: the default's
+    assert choice.params["lqr"]["q_shaft_angle"] == 400.0
+    assert choice.params["lqr"]["friction_compensation"] == pytest.approx(1.5 * 0.005)
+    assert {w for _, w in seen} == {325.0, 400.0} and len(seen) == 2 * len(C.RATIOS) + 1  # + the file's 7.4 mN m
+    assert len(said) == 1 and "at lqr.q_shaft_angle 325" in said[0] and "with lqr.q_shaft_angle 400" in said[0]
+    assert "with lqr.q_shaft_angle 400" in choice.comment_lines()[0]
+
+    only_low = lambda lqr, case, task: case == "damping*10" and lqr["friction_compensation"] > 0.0081  # noqa: E731
+    choice, seen, said = _choose_with(monkeypatch, only_low)
+    assert choice.best.shaft_weight is None and choice.best.ratio == 1.5
+    assert {w for _, w in seen} == {325.0} and not said
+    assert choice.params["lqr"]["q_shaft_angle"] == 325.0
+
+
+def test_the_second_stage_keeps_the_file_s_weight_when_the_stiffer_shaft_does_no_better(monkeypatch):
+    """The heavy rod leans out at 400, the damped one falls at 325: equal passes, so 325 stays."""
+    fails = lambda lqr, case, task: case == ("damping*10" if lqr["q_shaft_angle"] < 400 else "rho+15")  # noqa: E731
+    choice, seen, said = _choose_with(monkeypatch, fails)
+    assert len(said) == 1 and {w for _, w in seen} == {325.0, 400.0}
+    assert choice.best.shaft_weight is None and "damping*10/balance" in choice.best.failed
+    assert choice.params["lqr"]["q_shaft_angle"] == 325.0
 
 
 def test_no_dry_friction_leaves_nothing_to_choose():
     assert C.choose(load_params(None, ["motor.coulomb_friction=0.0"]), cases="nominal", jobs=1, progress=False) is None
+
+
+# Random rig s4_1 of the README's "Friction compensation, chosen on the identified rig" (J x0.80, b x1.22,
+# T_c x1.03, k_t x1.09, E x1.04, d x1.24), on which no compensation holds a rod ten times more damped at the
+# default shaft weight.
+RIG_S4_1 = ("motor.rotor_inertia=4.0236e-07", "motor.viscous_friction=6.1149e-04", "motor.coulomb_friction=5.1318e-03",
+         "motor.torque_constant=1.22471e-02", "motor.back_emf_constant=1.22471e-02", "rod.youngs_modulus=6.1859e5",
+         "rod.damping=1.2413e-03")
+
+
+def test_on_rig_s4_1_only_the_stiffer_shaft_holds_the_damped_rod():
+    """What the second stage is for, on the real plant: the design from rig s4_1's values with 1.4 x its
+    dry friction compensated lets a rod ten times more damped than its model end bent out of its 3 deg
+    band at lqr.q_shaft_angle 325, and holds it straight at 400."""
+    from rodctl.sim.matrix import CASES, ROBUST_BAND_DEG, run_case
+
+    p = load_params(None, list(RIG_S4_1) + ["lqr.friction_compensation=7.1845e-03"])
+    ends = {q: run_case(p.with_overrides(f"lqr.q_shaft_angle={q!r}"), CASES["damping*10"], "balance")
+            for q in (325.0, 400.0)}
+    assert not ends[325.0]["passed"] and ends[325.0]["final_dev_deg"] > 2 * ROBUST_BAND_DEG, ends[325.0]
+    assert ends[400.0]["passed"] and ends[400.0]["final_dev_deg"] < 0.5, ends[400.0]
 
 
 def test_rig_a_meets_the_nominal_goals_with_the_chosen_compensation(tmp_path):
@@ -78,6 +168,8 @@ def check_written_compensation(out, stdout: str) -> None:
     assert f"{fc / tc:.3g}" == f"{ratio:.3g}"  # the comment states the ratio to 3 digits
     assert fc == pytest.approx(nominal) or any(fc == pytest.approx(r * tc, rel=1e-9) for r in C.RATIOS)
     lines = [ln for ln in text.splitlines() if ln.startswith("# ^   ") and " passed" in ln]
-    assert len(lines) == len(C.RATIOS) + 1  # and the nominal file's own value
+    stiff = [ln for ln in lines if "with lqr.q_shaft_angle" in ln]  # the second stage's, if it ran
+    assert len(lines) - len(stiff) == len(C.RATIOS) + 1  # and the nominal file's own value
+    assert len(stiff) in (0, len(C.RATIOS) * len(C.SHAFT_WEIGHTS))
     assert sum("(the nominal file's)" in ln for ln in lines) == 1
     assert f"({ratio:.3g} x)" in stdout

@@ -298,13 +298,15 @@ def _choose_compensation(args, identified):
     print(f"friction compensation: {', '.join(f'{r:g}' for r in C.RATIOS)} x the identified Coulomb friction and "
           f"the nominal file's {1e3 * identified['lqr']['friction_compensation']:.2f} mN m, each judged by the "
           f"robustness matrix ({args.compensation_cases}) on the identified rig", file=sys.stderr, flush=True)
-    choice = C.choose(identified, cases=args.compensation_cases, jobs=args.jobs)
+    choice = C.choose(identified, cases=args.compensation_cases, jobs=args.jobs,
+                      say=lambda line: print(f"friction compensation: {line}", file=sys.stderr, flush=True))
     if choice is None:
         print("friction compensation: no Coulomb friction identified; kept the nominal file's", file=sys.stderr)
         return None
     for c in choice.candidates:
         print(f"  {c.line()}", file=sys.stderr)
-    print(f"friction compensation: {1e3 * choice.best.torque_nm:.2f} mN m ({choice.best.ratio:.3g} x)")
+    weight = f", lqr.q_shaft_angle {choice.best.shaft_weight:g}" if choice.best.shaft_weight is not None else ""
+    print(f"friction compensation: {1e3 * choice.best.torque_nm:.2f} mN m ({choice.best.ratio:.3g} x){weight}")
     return choice
 
 
@@ -368,8 +370,9 @@ def register(sub) -> None:
                         "one polished on the file's plant")
     p.add_argument("--compensation-cases", default="matrix", metavar="SET",
                    help="after the fit, choose lqr.friction_compensation for the identified rig by this case set "
-                        "of the robustness matrix (matrix, quick, nominal; ~2 min for matrix on 2 cores), or none "
-                        "to keep the nominal file's (default matrix)")
+                        "of the robustness matrix (matrix, quick, nominal; 2 to 3 min for matrix on 2 cores, about 2 min "
+                        "more when none passes every run and lqr.q_shaft_angle 400 is tried too), or none to keep "
+                        "the nominal file's (default matrix)")
     p.add_argument("--jobs", type=int, metavar="N", help="worker processes for that choice (default: every core)")
     add_design_args(p)
     p.set_defaults(func=run_identify)
