@@ -36,11 +36,12 @@ def test_ranking_takes_the_most_passes_then_the_widest_nominal_margin_then_the_d
 
 
 class _FakeRunner:
-    """Stands in for the process pool: every run passes except where `fails(params, case)` says not.
-    Records the (compensation ratio, shaft weight) of every design it was given."""
+    """Stands in for the process pool: every run passes except where `fails(lqr, case, task)` says not, and
+    settles in `settle(lqr, task)` seconds (default 0.5 s). Records the (compensation ratio, shaft weight)
+    of every design it was given."""
 
-    def __init__(self, fails, seen):
-        self.fails, self.seen = fails, seen
+    def __init__(self, fails, seen, settle=None):
+        self.fails, self.seen, self.settle = fails, seen, settle or (lambda lqr, task: 0.5)
 
     def __call__(self, **_):
         return self
@@ -57,17 +58,22 @@ class _FakeRunner:
             lqr = json.loads(u.params_json)["lqr"]
             self.seen.add((round(lqr["friction_compensation"] / 0.005, 3), lqr["q_shaft_angle"]))
             passed = not self.fails(lqr, u.case.name, u.task)
-            rows.append({"case": u.case.name, "task": u.task, "passed": passed, "settle_s": 0.5 if passed else None})
+            rows.append({"case": u.case.name, "task": u.task, "passed": passed,
+                         "settle_s": self.settle(lqr, u.task) if passed else None})
         return rows
 
 
-def _choose_with(monkeypatch, fails):
+def _choose_with(monkeypatch, fails, settle=None, sets=()):
     import rodctl.robust.execute as X
 
     seen, said = set(), []
-    monkeypatch.setattr(X, "Runner", _FakeRunner(fails, seen))
-    p = load_params(None, ["motor.coulomb_friction=0.005"])
+    monkeypatch.setattr(X, "Runner", _FakeRunner(fails, seen, settle))
+    p = load_params(None, ["motor.coulomb_friction=0.005", *sets])
     return C.choose(p, cases="matrix", say=said.append), seen, said
+
+
+def _drops_damped(lqr, case, task):
+    return case == "damping*10"  # at every weight and compensation: the stage runs, passes tie
 
 
 def test_a_stiffer_shaft_is_tried_only_when_no_compensation_passes_every_run(monkeypatch):
@@ -98,6 +104,56 @@ def test_the_second_stage_keeps_the_file_s_weight_when_the_stiffer_shaft_does_no
     assert len(said) == 1 and {w for _, w in seen} == {325.0, 400.0}
     assert choice.best.shaft_weight is None and "damping*10/balance" in choice.best.failed
     assert choice.params["lqr"]["q_shaft_angle"] == 325.0
+
+
+
+@pytest.mark.parametrize("own", [400.0, 500.0, 0.0])
+def test_no_second_stage_when_the_file_s_shaft_is_already_as_stiff_or_has_no_weight(monkeypatch, own):
+    """400 is a stiffer shaft only for a file below it; a file with no shaft weight (the soft-shaft and
+    low-ripple weights) chose that on purpose. Either way only the file's own weight is judged."""
+    choice, seen, said = _choose_with(monkeypatch, _drops_damped, sets=[f"lqr.q_shaft_angle={own!r}"])
+    assert {w for _, w in seen} == {own} and not said
+    assert choice.best.shaft_weight is None and choice.params["lqr"]["q_shaft_angle"] == own
+
+
+@pytest.mark.parametrize("stiff_margin_s, wins", [(0.84, True), (0.07, False)])
+def test_on_equal_passes_the_stiffer_shaft_must_widen_the_nominal_margin_by_a_tenth(monkeypatch, stiff_margin_s,
+                                                                                     wins):
+    """As on random rig s6_3 (47 passes at both weights): 400 met the nominal goals with 0.84 s to spare against
+    0.02 s at 325, and is kept; a gain of 0.05 s is within settling's jumps between compensations, and is not."""
+    from rodctl.sim.matrix import BALANCE_SETTLE_GOAL_S, SWINGUP_SETTLE_GOAL_S
+
+    goal = {"balance": BALANCE_SETTLE_GOAL_S, "swingup": SWINGUP_SETTLE_GOAL_S}
+    settle = lambda lqr, task: goal[task] - (stiff_margin_s if lqr["q_shaft_angle"] == 400 else 0.02)  # noqa: E731
+    choice, seen, said = _choose_with(monkeypatch, _drops_damped, settle)
+    assert len(said) == 1 and len(seen) == 2 * len(C.RATIOS) + 1
+    assert choice.best.passed == choice.best.runs - 2
+    assert (choice.best.shaft_weight == 400.0) is wins
+    assert choice.best.margin_s == pytest.approx(stiff_margin_s if wins else 0.02)
+    assert choice.params["lqr"]["q_shaft_angle"] == (400.0 if wins else 325.0)
+
+
+def test_the_written_file_carries_the_stiffer_shaft_and_says_why(monkeypatch, tmp_path):
+    """The parameter file takes lqr.q_shaft_angle 400 from the second stage, names the nominal file's 325 beside
+    it, and its compensation comments list both stages' candidates."""
+    import numpy as np
+
+    from rodctl.ident import report as R
+    from rodctl.ident.fit import FitResult
+
+    damped_falls_at_325 = lambda lqr, case, task: case == "damping*10" and lqr["q_shaft_angle"] < 400  # noqa: E731
+    choice, _, _ = _choose_with(monkeypatch, damped_falls_at_325)
+    nothing_fitted = FitResult({}, {}, {}, (), {}, {}, {}, np.zeros((0, 0)), np.zeros(0), 99.0, 99.0, 0.3, [], 1.0, 1)
+    out = tmp_path / "my_rod.toml"
+    out.write_text(R.parameter_file(load_params(), nothing_fitted, [("sil", "0" * 64)], compensation=choice))
+    check_written_compensation(out, stdout=f"({choice.best.ratio:.3g} x)")
+    text = out.read_text()
+    at = [i for i, ln in enumerate(text.splitlines()) if ln.startswith("q_shaft_angle = 400.0 ")]
+    assert len(at) == 1 and text.splitlines()[at[0] + 1] == (
+        "# ^ rodctl identify: 400 instead of the nominal file's 325: at 325 the best friction compensation passed "
+        "50/52 (nominal goals met with 1.00 s to spare), at 400 52/52 (nominal goals met with 1.00 s to spare); "
+        "the candidates are under lqr.friction_compensation")
+    assert load_params(out)["lqr"]["friction_compensation"] == pytest.approx(1.5 * 0.005)
 
 
 def test_no_dry_friction_leaves_nothing_to_choose():
@@ -171,5 +227,11 @@ def check_written_compensation(out, stdout: str) -> None:
     stiff = [ln for ln in lines if "with lqr.q_shaft_angle" in ln]  # the second stage's, if it ran
     assert len(lines) - len(stiff) == len(C.RATIOS) + 1  # and the nominal file's own value
     assert len(stiff) in (0, len(C.RATIOS) * len(C.SHAFT_WEIGHTS))
+    # the shaft weight the header names is the one written, and only a changed weight says why
+    weight = float(chosen[0].split("with lqr.q_shaft_angle ")[1].split(";")[0]) if "with lqr.q_shaft_angle" in chosen[0] \
+        else load_params()["lqr"]["q_shaft_angle"]
+    assert p["lqr"]["q_shaft_angle"] == weight
+    why = [ln for ln in text.splitlines() if "instead of the nominal file's" in ln]
+    assert len(why) == (weight != load_params()["lqr"]["q_shaft_angle"])
     assert sum("(the nominal file's)" in ln for ln in lines) == 1
     assert f"({ratio:.3g} x)" in stdout

@@ -370,9 +370,9 @@ def register(sub) -> None:
                         "one polished on the file's plant")
     p.add_argument("--compensation-cases", default="matrix", metavar="SET",
                    help="after the fit, choose lqr.friction_compensation for the identified rig by this case set "
-                        "of the robustness matrix (matrix, quick, nominal; 2 to 3 min for matrix on 2 cores, about 2 min "
-                        "more when none passes every run and lqr.q_shaft_angle 400 is tried too), or none to keep "
-                        "the nominal file's (default matrix)")
+                        "of the robustness matrix (matrix, quick, nominal; 2 to 3 min for matrix on 2 cores, about "
+                        "2 min more when none passes every run and the stiffer lqr.q_shaft_angle 400 is tried "
+                        "too), or none to keep the nominal file's (default matrix)")
     p.add_argument("--jobs", type=int, metavar="N", help="worker processes for that choice (default: every core)")
     add_design_args(p)
     p.set_defaults(func=run_identify)

@@ -42,9 +42,9 @@ def parameter_file(params, res: FitResult, log_digests: list[tuple[str, str]], c
     values, notes = written_values(res)
     out = with_values(params, values)
     if compensation is not None:
-        out = out.with_overrides(f"lqr.friction_compensation={compensation.best.torque_nm!r}")
-        if compensation.best.shaft_weight is not None:
-            out = out.with_overrides(f"lqr.q_shaft_angle={compensation.best.shaft_weight!r}")
+        chosen = compensation.params["lqr"]
+        out = out.with_overrides(f"lqr.friction_compensation={chosen['friction_compensation']!r}",
+                                 f"lqr.q_shaft_angle={chosen['q_shaft_angle']!r}")
     text = out.to_toml()
     # Comments go on the lines of the keys that carry each fitted value (the scale lives in k_t and k_e).
     keys = {fp.name: ([fp.key] if fp.key else ["motor.torque_constant", "motor.back_emf_constant"]) for fp in FIT_PARAMS}
@@ -62,8 +62,7 @@ def parameter_file(params, res: FitResult, log_digests: list[tuple[str, str]], c
             if key == "lqr.friction_compensation" and compensation is not None:
                 line += "".join(f"\n# ^ {c}" for c in compensation.comment_lines())
             if key == "lqr.q_shaft_angle" and compensation is not None and compensation.best.shaft_weight is not None:
-                line += ("\n# ^ rodctl identify: no friction compensation passed every run at the nominal file's "
-                         "weight; this one did better (the candidates are under lqr.friction_compensation)")
+                line += f"\n# ^ {compensation.weight_comment(params['lqr']['q_shaft_angle'])}"
         lines.append(line)
     head = ["# Identified by `rodctl identify` (output-error fit against the project's C plant).",
             f"# Validation on held-out data: {res.validation_fit_pct:.1f} % fit of theta_1; "
