@@ -76,12 +76,15 @@ def _drops_damped(lqr, case, task):
     return case == "damping*10"  # at every weight and compensation: the stage runs, passes tie
 
 
+def _damped_falls_at_325(lqr, case, task):
+    return case == "damping*10" and lqr["q_shaft_angle"] < 400
+
+
 def test_a_stiffer_shaft_is_tried_only_when_no_compensation_passes_every_run(monkeypatch):
     """A rod ten times more damped falls at the file's shaft weight (325) whatever the compensation: the
     second stage judges every ratio again at 400 and keeps the one that passes all runs. Where some
     compensation already passes, 400 is never run."""
-    drops_damped = lambda lqr, case, task: case == "damping*10" and lqr["q_shaft_angle"] < 400  # noqa: E731
-    choice, seen, said = _choose_with(monkeypatch, drops_damped)
+    choice, seen, said = _choose_with(monkeypatch, _damped_falls_at_325)
     assert choice.best.shaft_weight == 400.0 and choice.best.passed == choice.best.runs
     assert choice.best.ratio == 1.5  # every ratio passes at 400: the default's
     assert choice.params["lqr"]["q_shaft_angle"] == 400.0
@@ -104,7 +107,6 @@ def test_the_second_stage_keeps_the_file_s_weight_when_the_stiffer_shaft_does_no
     assert len(said) == 1 and {w for _, w in seen} == {325.0, 400.0}
     assert choice.best.shaft_weight is None and "damping*10/balance" in choice.best.failed
     assert choice.params["lqr"]["q_shaft_angle"] == 325.0
-
 
 
 @pytest.mark.parametrize("own", [400.0, 500.0, 0.0])
@@ -141,8 +143,7 @@ def test_the_written_file_carries_the_stiffer_shaft_and_says_why(monkeypatch, tm
     from rodctl.ident import report as R
     from rodctl.ident.fit import FitResult
 
-    damped_falls_at_325 = lambda lqr, case, task: case == "damping*10" and lqr["q_shaft_angle"] < 400  # noqa: E731
-    choice, _, _ = _choose_with(monkeypatch, damped_falls_at_325)
+    choice, _, _ = _choose_with(monkeypatch, _damped_falls_at_325)
     nothing_fitted = FitResult({}, {}, {}, (), {}, {}, {}, np.zeros((0, 0)), np.zeros(0), 99.0, 99.0, 0.3, [], 1.0, 1)
     out = tmp_path / "my_rod.toml"
     out.write_text(R.parameter_file(load_params(), nothing_fitted, [("sil", "0" * 64)], compensation=choice))

@@ -305,8 +305,8 @@ def _choose_compensation(args, identified):
         return None
     for c in choice.candidates:
         print(f"  {c.line()}", file=sys.stderr)
-    weight = f", lqr.q_shaft_angle {choice.best.shaft_weight:g}" if choice.best.shaft_weight is not None else ""
-    print(f"friction compensation: {1e3 * choice.best.torque_nm:.2f} mN m ({choice.best.ratio:.3g} x){weight}")
+    print(f"friction compensation: {1e3 * choice.best.torque_nm:.2f} mN m ({choice.best.ratio:.3g} x)"
+          f"{choice.best.with_weight(', ')}")
     return choice
 
 

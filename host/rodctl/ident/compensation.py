@@ -87,13 +87,16 @@ class Candidate:
             return f"nominal goals met with {self.margin_s:.2f} s to spare"
         return "a nominal goal missed"
 
+    def with_weight(self, sep: str) -> str:
+        """sep + "lqr.q_shaft_angle W" for a second-stage candidate, "" for one at the file's own weight."""
+        return f"{sep}lqr.q_shaft_angle {self.shaft_weight:g}" if self.shaft_weight is not None else ""
+
     def line(self) -> str:
         miss = f"; fails {', '.join(self.failed)}" if self.failed else ""
         margin = self.margin_text()
         own = " (the nominal file's)" if self.nominal else ""
-        weight = f" with lqr.q_shaft_angle {self.shaft_weight:g}" if self.shaft_weight is not None else ""
-        return (f"{self.ratio:.3g} x = {1e3 * self.torque_nm:.2f} mN m{own}{weight}: {self.passed}/{self.runs} "
-                f"passed, {margin}{miss}")
+        return (f"{self.ratio:.3g} x = {1e3 * self.torque_nm:.2f} mN m{own}{self.with_weight(' with ')}: "
+                f"{self.passed}/{self.runs} passed, {margin}{miss}")
 
 
 @dataclass(frozen=True)
@@ -104,10 +107,9 @@ class Choice:
     cases: str  # the matrix case set judged
 
     def comment_lines(self) -> list[str]:
-        weight = (f", with lqr.q_shaft_angle {self.best.shaft_weight:g}" if self.best.shaft_weight is not None
-                  else "")
         head = (f"rodctl identify: chosen by the robustness matrix ({self.cases}) on the identified rig, "
-                f"{self.best.ratio:.3g} x the identified Coulomb friction{weight}; candidates:")
+                f"{self.best.ratio:.3g} x the identified Coulomb friction{self.best.with_weight(', with ')}; "
+                f"candidates:")
         return [head] + ["  " + c.line() for c in self.candidates]
 
     def weight_comment(self, file_weight: float) -> str:
