@@ -49,8 +49,33 @@ def test_set_out_of_range_before_opening_the_port(value):
 
 def test_missing_params_file_of_a_sim_url_is_named():
     r = run_rodctl("status", "--port", "sim://?params=missing.toml")
-    assert r.returncode != 0
+    assert r.returncode == 2
     assert _one_line(r) == "rodctl: sim://: missing.toml: cannot read parameter file (No such file or directory)"
+
+
+@pytest.mark.parametrize("url, says", [
+    ("sim://?bogus=1", "unknown sim:// option 'bogus'"),
+    ("sim://x", "sim:// takes options only after '?'"),
+    ("sim://?edges=abc", "edges must be an integer, got 'abc'"),
+    ("sim://?plant=foo", "unknown plant 'foo'"),
+    ("sim://?plant=missing.toml", "missing.toml: cannot read parameter file"),
+    ("sim://?set=rod.nope=1", "--set rod.nope: unknown key"),
+])
+def test_a_bad_sim_url_is_bad_input_not_a_board_fault(url, says):
+    """The virtual board's URL is the user's own input: exit 2, as for a bad --params (a board that is not
+    plugged in is exit 1)."""
+    r = run_rodctl("status", "--port", url)
+    assert r.returncode == 2, r.stderr
+    line = _one_line(r)
+    assert line.startswith("rodctl: ") and says in line
+
+
+@pytest.mark.parametrize("argv", [["log", "--duration", "0"], ["arm", "--balance", "--duration", "nan"]])
+def test_a_non_positive_duration_is_refused_before_the_board_or_the_file(argv, tmp_path):
+    out = tmp_path / "run.csv"
+    r = run_rodctl(*argv, "--port", "/dev/ttyNOPE0", "--out", str(out))
+    assert r.returncode == 2, r.stderr
+    assert _one_line(r).endswith(": must be > 0 s") and not out.exists()
 
 
 def test_sim_compile_failure_is_one_clear_line(tmp_path):

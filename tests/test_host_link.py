@@ -233,7 +233,7 @@ def test_sim_url_options_choose_the_plant():
 
 
 def test_bad_sim_option_is_one_line(capsys):
-    assert cli.main(["status", "--port", "sim://?plant=rubber"]) == 1
+    assert cli.main(["status", "--port", "sim://?plant=rubber"]) == 2  # bad input, not a board fault
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "unknown plant 'rubber'" in err[0]
 

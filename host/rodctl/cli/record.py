@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 import time
 
-from rodgains.errors import UserError
+from rodgains.errors import InputError, UserError
 
 from rodctl.cli.common import (ARM_CHOICES, RateMeter, StatusLine, add_design_args, add_port_arg, default_log_name,
                                design_params, no_interrupts, session_for, status_text, stop_signals)
@@ -18,14 +18,14 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
     from rodctl.logs.metadata import device_metadata
     from rodctl.logs.writer import LogWriter, check_new, log_format, require_format
 
+    duration = getattr(args, "duration", None)
+    if duration is not None and not duration > 0:
+        raise InputError(f"--duration {duration:g}: must be > 0 s")
     fmt = None
     if out is not None:
         fmt = log_format(out, getattr(args, "format", None))
         require_format(fmt)  # before touching the board
         check_new(out, fmt, getattr(args, "force", False))
-    duration = getattr(args, "duration", None)
-    if duration is not None and not duration > 0:
-        raise UserError("--duration must be positive")
     session = session_for(args)
     writer = None
     status = StatusLine()

@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 
-from rodgains.errors import UserError
+from rodgains.errors import InputError, UserError
 
 from rodctl.link import protocol as P
 
@@ -261,13 +261,13 @@ class Scope:
 def run_scope(args) -> int:
     from rodctl.cli.plot import display_problem
 
+    if args.duration is not None and not args.duration > 0:
+        raise InputError(f"--duration {args.duration:g}: must be > 0 s")
     why = display_problem()
     if why is not None:
         raise UserError(f"the scope needs a display: {why}. Record instead with "
                         f"`rodctl log --port {args.port or 'PORT'} --out run.csv`, then "
                         "`rodctl plot run.csv --out run.png`")
-    if args.duration is not None and not args.duration > 0:
-        raise UserError("--duration must be positive")
     if args.record:
         from rodctl.logs.writer import check_new, log_format
 

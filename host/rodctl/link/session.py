@@ -200,9 +200,10 @@ def open_serial(port: str, timeout: float = 0.05):
         if not is_url and (isinstance(e.__cause__ or e.__context__, FileNotFoundError) or "No such file" in msg):
             raise UserError(f"cannot open {port}: no such port (is the board plugged in? "
                             "`--port sim://` runs the simulated rod)") from None
+        kind = InputError if getattr(e, "exit_code", 1) == 2 else UserError  # a bad sim:// URL is bad input
         if msg.startswith("sim://: "):  # the virtual board's own one-line reason (e.g. a missing params= file)
-            raise UserError(msg) from None
-        raise UserError(f"cannot open {port}: {msg}") from None
+            raise kind(msg) from None
+        raise kind(f"cannot open {port}: {msg}") from None
     except (ValueError, OSError) as e:
         raise UserError(f"cannot open {port}: {e}") from None
 

@@ -141,24 +141,24 @@ class VirtualDevice:
                      params: str | None = None, set=(), theta0_deg: float | str | None = None) -> "VirtualDevice":
         """A board from sim:// URL options (strings): plant, edges, params (file), set (list of
         section.key=value overrides), theta0_deg (every edge's angle at power-on, 0 hanging, 180 upright)."""
-        from rodgains.errors import UserError
+        from rodgains.errors import InputError
 
         if isinstance(set, str):
             set = [set]
         try:
             theta0 = float(theta0_deg) if theta0_deg not in (None, "") else 0.0
         except ValueError:
-            raise UserError(f"theta0_deg must be a number [deg], got {theta0_deg!r}") from None
+            raise InputError(f"theta0_deg must be a number [deg], got {theta0_deg!r}") from None
         if not math.isfinite(theta0) or abs(theta0) > 360:
-            raise UserError(f"theta0_deg must be within -360..360 deg, got {theta0_deg!r}")
+            raise InputError(f"theta0_deg must be within -360..360 deg, got {theta0_deg!r}")
 
         if edges is not None:
             try:
                 edges = int(edges)
             except ValueError:
-                raise UserError(f"edges must be an integer, got {edges!r}") from None
+                raise InputError(f"edges must be an integer, got {edges!r}") from None
             if not 2 <= edges <= 64:
-                raise UserError(f"edges must be 2..64, got {edges}")
+                raise InputError(f"edges must be 2..64, got {edges}")
         plant_params = None
         if plant is not None and plant.endswith(".toml"):
             from rodgains.params import load_params

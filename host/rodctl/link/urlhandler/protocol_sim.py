@@ -32,17 +32,23 @@ OPTIONS = ("plant", "edges", "params", "set", "theta0_deg")
 REPEATABLE = ("set",)
 
 
+class BadURL(SerialException):
+    """A sim:// URL or a file it names that cannot be used: the user's input (exit 2), not a board fault."""
+
+    exit_code = 2
+
+
 def parse_url(url: str) -> dict[str, str]:
-    """Options of a sim:// URL; raises SerialException on a malformed one."""
+    """Options of a sim:// URL; raises BadURL on a malformed one."""
     parts = urlparse.urlsplit(url)
     if parts.scheme != "sim":
-        raise SerialException(f"expected a URL like sim://?plant=der&edges=20&params=FILE, got {url!r}")
+        raise BadURL(f"expected a URL like sim://?plant=der&edges=20&params=FILE, got {url!r}")
     if parts.netloc or parts.path not in ("", "/"):
-        raise SerialException(f"sim:// takes options only after '?', e.g. sim://?edges=20 (got {url!r})")
+        raise BadURL(f"sim:// takes options only after '?', e.g. sim://?edges=20 (got {url!r})")
     opts: dict[str, str] = {}
     for key, values in urlparse.parse_qs(parts.query, keep_blank_values=True).items():
         if key not in OPTIONS:
-            raise SerialException(f"unknown sim:// option {key!r}: options are {', '.join(OPTIONS)}")
+            raise BadURL(f"unknown sim:// option {key!r}: options are {', '.join(OPTIONS)}")
         opts[key] = values if key in REPEATABLE else values[-1]
     return opts
 
@@ -75,7 +81,9 @@ class Serial(SerialBase):
         try:
             self.device = VirtualDevice.from_options(**opts)
         except UserError as e:
-            raise SerialException(f"sim://: {e}") from None
+            err = SerialException(f"sim://: {e}")
+            err.exit_code = e.exit_code  # a missing params= file stays bad input (2); a failed compile stays 1
+            raise err from None
         self._rx.clear()
         self._tx.clear()
         self._runner = RealTimeRunner(self.device, take_input=self._take_input, deliver=self._deliver,
