@@ -70,10 +70,12 @@ def test_a_bad_sim_url_is_bad_input_not_a_board_fault(url, says):
     assert line.startswith("rodctl: ") and says in line
 
 
-@pytest.mark.parametrize("argv", [["log", "--duration", "0"], ["arm", "--balance", "--duration", "nan"]])
+@pytest.mark.parametrize("argv", [["log", "--duration", "0", "--port", "/dev/ttyNOPE0", "--out"],
+                                  ["arm", "--balance", "--duration", "nan", "--port", "/dev/ttyNOPE0", "--out"],
+                                  ["sim-device", "--pty", "--duration", "-1", "--link"]])
 def test_a_non_positive_duration_is_refused_before_the_board_or_the_file(argv, tmp_path):
-    out = tmp_path / "run.csv"
-    r = run_rodctl(*argv, "--port", "/dev/ttyNOPE0", "--out", str(out))
+    out = tmp_path / "run.csv"  # the log, or the sim-device's link
+    r = run_rodctl(*argv, str(out))
     assert r.returncode == 2, r.stderr
     assert _one_line(r).endswith(": must be > 0 s") and not out.exists()
 

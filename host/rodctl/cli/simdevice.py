@@ -8,9 +8,8 @@ import sys
 import time
 from pathlib import Path
 
-from rodgains.errors import UserError
+from rodgains.errors import InputError, UserError
 from rodctl.cli.common import mode_text, stop_signals
-
 
 
 def run_sim_device(args) -> int:
@@ -18,6 +17,8 @@ def run_sim_device(args) -> int:
 
     from rodctl.sim.device import RealTimeRunner, VirtualDevice
 
+    if args.duration is not None and not args.duration > 0:
+        raise InputError(f"--duration {args.duration:g}: must be > 0 s")
     if not hasattr(os, "openpty"):
         raise UserError("sim-device --pty needs a POSIX system (pseudo-terminals)")
     dev = VirtualDevice.from_options(plant=args.plant, edges=args.edges, params=args.params, set=args.overrides,
@@ -123,5 +124,5 @@ def register(sub) -> None:
     p.add_argument("--plant", choices=("inextensible", "der"), default="inextensible", help="simulated rod model")
     p.add_argument("--edges", type=int, help="plant edges (default: the parameters' N)")
     p.add_argument("--link", metavar="PATH", help="also make PATH a symlink to the pseudo-terminal")
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds of wall time [s]")
     p.set_defaults(func=run_sim_device)
