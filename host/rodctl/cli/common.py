@@ -109,6 +109,14 @@ class RateMeter:
         return (frames - f0) / (now - t0) if now > t0 else 0.0
 
 
+def check_duration(seconds: float | None) -> None:
+    """--duration [s]: None runs until stopped; anything else must be > 0 (InputError, exit 2)."""
+    from rodgains.errors import InputError
+
+    if seconds is not None and not seconds > 0:
+        raise InputError(f"--duration {seconds:g}: must be > 0 s")
+
+
 def mode_text(mode, reason) -> str:
     m = name_of(P.Mode, mode)
     if int(mode) == P.Mode.FAULT:

@@ -5,10 +5,10 @@ from __future__ import annotations
 import sys
 import time
 
-from rodgains.errors import InputError, UserError
+from rodgains.errors import UserError
 
-from rodctl.cli.common import (ARM_CHOICES, RateMeter, StatusLine, add_design_args, add_port_arg, default_log_name,
-                               design_params, no_interrupts, session_for, status_text, stop_signals)
+from rodctl.cli.common import (ARM_CHOICES, RateMeter, StatusLine, add_design_args, add_port_arg, check_duration,
+                               default_log_name, design_params, no_interrupts, session_for, status_text, stop_signals)
 from rodctl.link import protocol as P
 from rodctl.link.session import Session, name_of
 
@@ -19,8 +19,7 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
     from rodctl.logs.writer import LogWriter, check_new, log_format, require_format
 
     duration = getattr(args, "duration", None)
-    if duration is not None and not duration > 0:
-        raise InputError(f"--duration {duration:g}: must be > 0 s")
+    check_duration(duration)
     fmt = None
     if out is not None:
         fmt = log_format(out, getattr(args, "format", None))

@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 
-from rodgains.errors import InputError, UserError
+from rodgains.errors import UserError
 
 from rodctl.link import protocol as P
 
@@ -259,10 +259,10 @@ class Scope:
 
 
 def run_scope(args) -> int:
+    from rodctl.cli.common import check_duration
     from rodctl.cli.plot import display_problem
 
-    if args.duration is not None and not args.duration > 0:
-        raise InputError(f"--duration {args.duration:g}: must be > 0 s")
+    check_duration(args.duration)
     why = display_problem()
     if why is not None:
         raise UserError(f"the scope needs a display: {why}. Record instead with "

@@ -8,8 +8,8 @@ import sys
 import time
 from pathlib import Path
 
-from rodgains.errors import InputError, UserError
-from rodctl.cli.common import mode_text, stop_signals
+from rodgains.errors import UserError
+from rodctl.cli.common import check_duration, mode_text, stop_signals
 
 
 def run_sim_device(args) -> int:
@@ -17,8 +17,7 @@ def run_sim_device(args) -> int:
 
     from rodctl.sim.device import RealTimeRunner, VirtualDevice
 
-    if args.duration is not None and not args.duration > 0:
-        raise InputError(f"--duration {args.duration:g}: must be > 0 s")
+    check_duration(args.duration)
     if not hasattr(os, "openpty"):
         raise UserError("sim-device --pty needs a POSIX system (pseudo-terminals)")
     dev = VirtualDevice.from_options(plant=args.plant, edges=args.edges, params=args.params, set=args.overrides,

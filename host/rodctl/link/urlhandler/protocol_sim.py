@@ -81,9 +81,8 @@ class Serial(SerialBase):
         try:
             self.device = VirtualDevice.from_options(**opts)
         except UserError as e:
-            err = SerialException(f"sim://: {e}")
-            err.exit_code = e.exit_code  # a missing params= file stays bad input (2); a failed compile stays 1
-            raise err from None
+            kind = BadURL if e.exit_code == 2 else SerialException  # a missing params= file, not a failed compile
+            raise kind(f"sim://: {e}") from None
         self._rx.clear()
         self._tx.clear()
         self._runner = RealTimeRunner(self.device, take_input=self._take_input, deliver=self._deliver,
