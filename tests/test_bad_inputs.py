@@ -80,6 +80,27 @@ def test_a_non_positive_duration_is_refused_before_the_board_or_the_file(argv, t
     assert _one_line(r).endswith(": must be > 0 s") and not out.exists()
 
 
+@pytest.mark.parametrize("argv, what, folder", [
+    (["sim", "--duration", "0.2", "--no-log", "--plot", "{blocked}/x.png"], "--plot", "{blocked}"),
+    (["sim", "--duration", "0.2", "--no-plot", "--log", "{blocked}/x.csv"], "--log", "{blocked}"),
+    (["gains", "--header", "{blocked}/rod_gains.h"], "--header", "{blocked}"),
+    (["identify", "--port", "sim://", "--yes", "--experiment", "release", "--log-dir", "{blocked}/logs",
+      "--out", "{tmp}/o.toml"], "--log-dir", "{blocked}/logs"),
+])
+def test_an_output_folder_with_a_file_in_the_way_is_one_line_before_any_work(argv, what, folder, tmp_path):
+    """These outputs make their folder; a file where the folder should be is bad input (exit 2), said
+    before the simulation, the design or the experiment (not an internal error after it)."""
+    blocked = tmp_path / "a_file"
+    blocked.write_text("not a folder\n")
+    r = run_rodctl(*(a.format(blocked=blocked, tmp=tmp_path) for a in argv), timeout=120)
+    assert r.returncode == 2, r.stderr
+    line = _one_line(r)
+    assert line.startswith(f"rodctl: {what} {blocked}/")
+    assert line.endswith(f": cannot make folder {folder.format(blocked=blocked)}: a file is in the way")
+    assert "simulated" not in r.stdout and "release:" not in r.stderr  # nothing ran
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]
+
+
 def test_sim_compile_failure_is_one_clear_line(tmp_path):
     """The compiler's first `error:` line, not the "In file included from" chain before it."""
     cc = tmp_path / "cc"

@@ -12,6 +12,7 @@ from rodgains.errors import InputError
 from rodgains.params import DEFAULT_PARAMS, Params, load_params
 
 from rodctl import paths
+from rodctl.cli.outputs import check_output, make_folder
 
 
 def add_param_args(p: argparse.ArgumentParser) -> None:
@@ -70,18 +71,6 @@ def generated_files(args) -> tuple[object, dict[Path, str]]:
     return d, files
 
 
-def check_output(path: str | Path, what: str, *, force: bool | None = None) -> None:
-    """InputError unless `path` can be written: its folder exists and it is not a folder; with `force`
-    given, an existing file also needs force=True. Checked before any design work or simulation."""
-    if force is not None and Path(path).exists() and not force:
-        raise InputError(f"{path} exists; pass --force to overwrite")
-    parent = Path(path).resolve().parent
-    if not parent.is_dir():
-        raise InputError(f"{what} {path}: folder {parent} does not exist")
-    if Path(path).is_dir():
-        raise InputError(f"{what} {path}: is a folder")
-
-
 def _write(path: Path, text: str) -> None:
     try:
         path.write_text(text)
@@ -119,10 +108,7 @@ def run_gains(args) -> int:
         print(f"wrote {args.json}")
     if args.header or not (args.report or args.json):
         for f, text in files.items():
-            try:
-                f.parent.mkdir(parents=True, exist_ok=True)
-            except OSError as e:
-                raise InputError(f"cannot create {f.parent}: {e.strerror or e}") from None
+            make_folder(f.parent, f"--header {f}")
             _write(f, text)
         rho = d.checks["closed_loop_spectral_radius"]
         print(f"wrote {', '.join(str(f) for f in files)}  (N={d.N}, {1 / d.dt:g} Hz, "

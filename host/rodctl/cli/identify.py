@@ -13,7 +13,7 @@ from pathlib import Path
 from rodgains.errors import InputError, UserError
 
 from rodctl.cli.common import add_design_args, add_port_arg
-from rodctl.cli.gains import check_output
+from rodctl.cli.outputs import check_output, make_folder
 
 REST_RATE_RAD_S = 0.05  # the rod counts as at rest below this base rate ...
 REST_HOLD_S = 0.5  # ... for this long
@@ -186,8 +186,7 @@ def run_port(args) -> int:
         raise InputError(f"--soft-limit must be in (0, 1], got {args.soft_limit:g}")
     exps = [e.scaled(torque=args.scale) for e in E.select(args.experiment)]
     check_output(args.out, "--out", force=args.force)
-    log_dir = Path(args.log_dir)
-    log_dir.mkdir(parents=True, exist_ok=True)
+    log_dir = make_folder(args.log_dir, f"--log-dir {args.log_dir}")
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     logs = []
     with stop_signals(), Session(args.port) as session:

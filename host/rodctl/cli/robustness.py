@@ -7,7 +7,8 @@ import sys
 import time
 from pathlib import Path
 
-from rodctl.cli.gains import _shown_path, check_output, add_param_args, params_from_args
+from rodctl.cli.gains import _shown_path, add_param_args, params_from_args
+from rodctl.cli.outputs import check_output
 
 
 def add_exec_args(p) -> None:

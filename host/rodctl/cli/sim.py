@@ -12,6 +12,7 @@ import numpy as np
 from rodgains.errors import InputError
 
 from rodctl.cli.gains import add_param_args, params_from_args
+from rodctl.cli.outputs import make_folder
 
 TABLE_BEGIN = "<!-- BEGIN scenario table: regenerate with `rodctl sim --all --readme README.md` -->"
 TABLE_END = "<!-- END scenario table -->"
@@ -108,7 +109,10 @@ def run_one(args, name: str, params, all_mode: bool = False):
     from rodctl.sim.scenarios import Options, SCENARIOS
 
     scen = SCENARIOS[name]
-    _, log = _outputs(args, name, all_mode)
+    plot, log = _outputs(args, name, all_mode)
+    for path, flag in ((plot, "--figures" if all_mode else "--plot"), (log, "--log")):  # before the run
+        if path is not None:
+            make_folder(path.parent, f"{flag} {path}")
     if log is not None and args.log and not args.force:  # an explicit --log is never replaced silently
         from rodctl.logs.writer import check_new
 
@@ -120,16 +124,13 @@ def run_one(args, name: str, params, all_mode: bool = False):
     finally:
         prog.done()
     wall = time.monotonic() - t0
-    plot, log = _outputs(args, name, all_mode)
     written = []
     if plot is not None:
         from rodctl.sim.figures import save
 
-        plot.parent.mkdir(parents=True, exist_ok=True)
         save(o, plot)
         written.append(str(plot))
     if log is not None:
-        log.parent.mkdir(parents=True, exist_ok=True)
         traces = o.traces
         if len(traces) > 1 and args.log and not args.force:
             from rodctl.logs.writer import check_new

@@ -9,7 +9,8 @@ from pathlib import Path
 
 from rodgains.errors import ParamError
 
-from rodctl.cli.gains import _shown_path, check_output, add_param_args, params_from_args
+from rodctl.cli.gains import _shown_path, add_param_args, params_from_args
+from rodctl.cli.outputs import check_output
 from rodctl.cli.robustness import add_exec_args, add_score_args, check_score_args, command_line
 
 SCENARIOS = ("balance", "swingup", "score")

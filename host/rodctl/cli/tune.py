@@ -8,7 +8,8 @@ import time
 
 from rodgains.errors import InputError
 
-from rodctl.cli.gains import add_param_args, check_output, params_from_args
+from rodctl.cli.gains import add_param_args, params_from_args
+from rodctl.cli.outputs import check_output
 from rodctl.cli.robustness import add_exec_args, add_score_args, check_score_args
 
 
