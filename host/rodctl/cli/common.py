@@ -12,6 +12,8 @@ import time
 import urllib.parse as urlparse
 from pathlib import Path
 
+from rodgains.errors import InputError
+
 from rodctl.link import protocol as P
 from rodctl.link.session import Session, is_tty, name_of, parse_assignment, reason_text
 from rodctl.logs.schema import from_upright_deg
@@ -111,8 +113,6 @@ class RateMeter:
 
 def check_duration(seconds: float | None) -> None:
     """--duration [s]: None runs until stopped; anything else must be > 0 (InputError, exit 2)."""
-    from rodgains.errors import InputError
-
     if seconds is not None and not seconds > 0:
         raise InputError(f"--duration {seconds:g}: must be > 0 s")
 

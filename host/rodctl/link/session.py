@@ -186,6 +186,7 @@ def open_serial(port: str, timeout: float = 0.05):
     import serial
 
     from rodctl.link.urlhandler import register
+    from rodctl.link.urlhandler.protocol_sim import BadURL
 
     register()
     is_url = "://" in port
@@ -200,7 +201,7 @@ def open_serial(port: str, timeout: float = 0.05):
         if not is_url and (isinstance(e.__cause__ or e.__context__, FileNotFoundError) or "No such file" in msg):
             raise UserError(f"cannot open {port}: no such port (is the board plugged in? "
                             "`--port sim://` runs the simulated rod)") from None
-        kind = InputError if getattr(e, "exit_code", 1) == 2 else UserError  # a bad sim:// URL is bad input
+        kind = InputError if isinstance(e, BadURL) else UserError  # a bad sim:// URL is bad input
         if msg.startswith("sim://: "):  # the virtual board's own one-line reason (e.g. a missing params= file)
             raise kind(msg) from None
         raise kind(f"cannot open {port}: {msg}") from None

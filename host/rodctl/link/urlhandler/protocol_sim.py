@@ -33,9 +33,8 @@ REPEATABLE = ("set",)
 
 
 class BadURL(SerialException):
-    """A sim:// URL or a file it names that cannot be used: the user's input (exit 2), not a board fault."""
-
-    exit_code = 2
+    """A sim:// URL or a file it names that cannot be used: the user's input (rodctl exits 2), not a board
+    fault."""
 
 
 def parse_url(url: str) -> dict[str, str]:
