@@ -191,7 +191,8 @@ def test_plant_options():
     plant = Plant(P, edges=5, J=0.0, b=0.0)
     assert (plant.config.J, plant.config.b) == (0.0, 0.0)
     phys = Plant(P, edges=5)
-    assert phys.config.J == pytest.approx(5e-7 * 20.4**2) and phys.config.b == 5e-4  # the physical motor
+    # the physical motor with the gearbox's output side, as a rigid shaft carries them
+    assert phys.config.J == pytest.approx(5e-7 * 20.4**2 + P["gearbox"]["output_inertia"]) and phys.config.b == 5e-4
     assert Plant(P).N == P.N == P["rod"]["edges"]
     with pytest.raises(ValueError):
         Plant(P, kind="soft")

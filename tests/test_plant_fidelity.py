@@ -63,8 +63,8 @@ def test_hub_length_not_edges_sets_the_clamped_length(p):
 
 
 def test_the_hub_turns_with_the_encoder(p):
-    """Edge 1 is the clamped hub: the encoder reads its angle, and it never bends."""
-    pl = faithful_plant(p, input_mode="torque")
+    """Edge 1 is the clamped hub: on a rigid gearbox the encoder reads its angle, and it never bends."""
+    pl = faithful_plant(p, input_mode="torque", gear=None)
     pl.set_state(np.zeros(pl.N))
     for _ in range(300):
         pl.advance(0.05, 1e-3)

@@ -1,7 +1,10 @@
-"""Issue 8: the firmware judged on the faithful plant, every case of the robustness matrix, both tasks.
+"""The firmware judged on the faithful plant, every case of the robustness matrix, both tasks (issues 8, 31).
 
-The whole matrix runs once per session (module fixture, ~30 s CPU) and every case is asserted by
-its own test. The pass rules are rodctl.sim.matrix.criterion(task) (nominal: the stricter goals).
+The whole matrix runs once per session (module fixture, ~20 s CPU on two cores). The pass rules are
+rodctl.sim.matrix.criterion(task) (nominal: the stricter goals). With the gearbox's play the rod rests
+on one flank of the gap and now and then crosses to the other (docs/control.md), so a run that ends
+during a crossing ends outside the band: the in-range runs are held to a pass share, the known
+failures are listed with their reasons, and no run may fault.
 """
 
 import pytest
@@ -10,11 +13,9 @@ from rodgains.buckling import greenhill_length
 from rodgains.params import load_params
 from rodctl.sim import matrix
 
-# Cases the default design does not pass yet (matrix.KNOWN_FAILURES, README); strict xfail: the
-# test turns red the day they pass, so the list cannot go stale.
 KNOWN_FAILURES = matrix.KNOWN_FAILURES
-
 RUNS = [(c.name, t) for t in matrix.TASKS for c in matrix.cases_for(t)]
+IDEAL = load_params().with_overrides(*matrix.IDEAL_GEARBOX)
 
 
 @pytest.fixture(scope="module")
@@ -23,16 +24,33 @@ def results():
     return {(r["case"], r["task"]): r for r in matrix.run_matrix(p)}
 
 
-@pytest.mark.parametrize("case,task", [
-    pytest.param(c, t, marks=pytest.mark.xfail(strict=True, reason=KNOWN_FAILURES[(c, t)]))
-    if (c, t) in KNOWN_FAILURES else (c, t) for c, t in RUNS])
-def test_case_passes(results, case, task):
-    r = results[(case, task)]
-    assert r["passed"], f"{case}/{task}: {r['criterion']}; got {r}"
+def test_no_run_of_the_matrix_faults(results):
+    faulted = {k: r["fault_reason"] for k, r in results.items() if r["fault_reason"]}
+    assert not faulted
 
 
-def test_nominal_meets_the_goals_of_issue_8(results):
+def test_the_in_range_runs_pass_as_often_as_measured(results):
+    in_range = [k for k in RUNS if k not in KNOWN_FAILURES]
+    passed = [k for k in in_range if results[k]["passed"]]
+    assert len(passed) >= matrix.MIN_PASS_SHARE * len(in_range), sorted(set(in_range) - set(passed))
+
+
+def test_every_known_failure_is_a_listed_case_with_its_reason():
+    assert set(KNOWN_FAILURES) <= set(RUNS)
+    assert all(len(why) > 20 for why in KNOWN_FAILURES.values())
+
+
+def test_the_nominal_rig_with_play_holds_the_rod_within_the_matrix_band(results):
+    """Issue 31's nominal rig (1 deg of play, the boot zero half a count off): caught at once and held
+    within the 3 deg band, not within the 1 deg goal (docs/control.md "What the matrix shows")."""
     b, s = results[("nominal", "balance")], results[("nominal", "swingup")]
+    assert b["final_dev_deg"] < 3.5 and s["final_dev_deg"] < 3.5, (b, s)
+    assert s["caught_at_s"] <= matrix.SWINGUP_CATCH_GOAL_S and s["base_turns_max"] <= matrix.SWINGUP_TURNS_GOAL
+
+
+def test_with_an_ideal_gearbox_the_nominal_meets_the_goals_of_issue_8():
+    b = matrix.run_case(IDEAL, matrix.CASES["nominal"], "balance")
+    s = matrix.run_case(IDEAL, matrix.CASES["nominal"], "swingup")
     assert b["settle_s"] <= matrix.BALANCE_SETTLE_GOAL_S and b["fault_reason"] == 0
     assert s["caught_at_s"] <= matrix.SWINGUP_CATCH_GOAL_S
     assert s["settle_s"] <= matrix.SWINGUP_SETTLE_GOAL_S
@@ -42,7 +60,10 @@ def test_nominal_meets_the_goals_of_issue_8(results):
 def test_every_case_of_the_issue_is_in_the_matrix():
     wanted = {"E+15", "E-15", "rho+15", "rho-15", "damping*0.1", "damping*10", "viscous*3", "coulomb*0",
               "coulomb*2", "J+30", "J-30", "kt+15", "kt-15", "L+3", "L-3", "supply11", "supply13", "delay+1",
-              "dist+", "dist-", "inext10", "inext20", "inext40", "der10", "der20", "der40"}
+              "dist+", "dist-", "inext10", "inext20", "inext40", "der10", "der20", "der40",
+              # issue 31: what a real rig adds between the encoder and the rod
+              "backlash0", "backlash0.5", "backlash2", "backlash3", "gear20", "gear200", "zero+0.5", "zero-0.5",
+              "curved", "lag0.75", "E-15,coulomb*0", "rho+15,coulomb*0"}
     assert wanted <= set(matrix.CASES)
     assert set(matrix.CASE_SETS["matrix"]) == set(matrix.CASES)
     assert {c.name for c in matrix.cases_for("swingup")} == set(matrix.CASES) - {"dist+", "dist-"}
@@ -129,7 +150,7 @@ def test_pumping_past_the_rigid_upright_energy_catches_a_short_stiff_rod():
     first approach (README "Swing-up: energy pumping")."""
     from test_identify import hidden_params
 
-    rig = hidden_params("C")
+    rig = hidden_params("C").with_overrides(*matrix.IDEAL_GEARBOX)
     assert rig["swing_up"]["energy_target"] == 1.05
     rigid = matrix.run_case(rig.with_overrides("swing_up.energy_target=1.0"), matrix.CASES["viscous*3"], "swingup")
     assert rigid["caught_at_s"] is None and not rigid["passed"], rigid
@@ -139,13 +160,13 @@ def test_pumping_past_the_rigid_upright_energy_catches_a_short_stiff_rod():
 
 
 def test_past_its_clamped_buckling_length_the_rod_ends_bent_and_the_table_says_why():
-    """README "System identification": Table I's design on its own plant, E scaled. At x0.85 the rod
-    above the hub is 0.994 x its clamped buckling length and the 30 deg release holds (measured 1.03
-    deg); at x0.79 it is 1.018 x and the rod ends bent over a shaft held upright (measured 44.6 deg).
-    The table marks such a case."""
+    """Table I's design on its own plant with an ideal gearbox, E scaled. At x0.85 the rod above the hub
+    is 0.994 x its clamped buckling length and the 30 deg release holds (measured 1.03 deg); at x0.79
+    it is 1.018 x and the rod ends bent over a shaft held upright (measured 44.6 deg). The table marks
+    such a case."""
     from rodctl.cli.robustness import table_lines
 
-    p = load_params()
+    p = IDEAL
     rows = [matrix.run_case(p, matrix.Case(f"E*{f}", "E scaled", (f"rod.youngs_modulus*={f}",)), "balance")
             for f in (0.85, 0.79)]
     held, bent = rows
@@ -164,5 +185,5 @@ def test_the_matrix_cases_past_the_buckling_length_of_a_rig():
 
     assert matrix.buckled_cases(load_params()) == {}
     past = matrix.buckled_cases(hidden_params("B"))
-    assert set(past) == {"E-15", "rho+15", "L+3"}
+    assert set(past) == {"E-15", "rho+15", "L+3", "E-15,coulomb*0", "rho+15,coulomb*0"}
     assert past["E-15"] == pytest.approx(1.038, abs=1e-3) and past["L+3"] == pytest.approx(1.015, abs=1e-3)

@@ -95,6 +95,14 @@ int rod_sil_status(float *est, int cap)
     return status_of(&sil, est, cap);
 }
 
+void rod_sil_balance(float *trim, float *hold, float *disturbance)
+{
+    const rod_control_t *c = &sil.control;
+    if (trim) *trim = c->trim.trim;
+    if (hold) *hold = c->trim.hold;
+    if (disturbance) *disturbance = c->obs.w;
+}
+
 float rod_sil_duty(void)
 {
     return sil_out.duty;

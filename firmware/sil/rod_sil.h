@@ -63,6 +63,9 @@ ROD_SIL_API int rod_sil_arm_result(int mode);       /* rod_sil_arm that returns 
  * code; mode 5 (IDENTIFY) until the excitation ends, then 0 (DISARMED). */
 ROD_SIL_API int rod_sil_identify(int excitation, float amplitude, float duration, float shape1, float shape2,
                                  int seed);
+/* The balance's own estimates: the set-point trim [rad] (rod_trim.h), the held torque [N m] and the
+ * estimated base-torque disturbance w [N m]. Any pointer may be NULL. */
+ROD_SIL_API void rod_sil_balance(float *trim, float *hold, float *disturbance);
 /* Test hook: poisons the balance estimate with a NaN (the next BALANCE step must trip). */
 ROD_SIL_API void rod_sil_inject_nan(void);
 

@@ -13,9 +13,10 @@ from pathlib import Path
 import numpy as np
 
 from .design import Design
+from .trim import trim_gains
 
 # Bump when the macro set or its meaning changes; firmware/src/core/rod_config.h checks it.
-HEADER_SCHEMA_VERSION = 2
+HEADER_SCHEMA_VERSION = 3
 DEFAULT_HEADER = Path("firmware/include/rod_gains.h")
 
 
@@ -67,6 +68,7 @@ def header_text(d: Design, command: str) -> str:
     k1, k2 = rate_filter_gains(p["encoder"]["rate_bandwidth_hz"], d.dt)
     sha = p.sha256()
     swing = p["swing_up"]
+    trim = trim_gains(d)
     safety = p["safety"]
     drv = p["driver"]
 
@@ -108,6 +110,13 @@ def header_text(d: Design, command: str) -> str:
         ("ROD_ANGLE_LIMIT_RAD", f32(deg(safety["angle_limit_deg"])), "balance disarms beyond this from upright [rad]"),
         ("ROD_SPEED_LIMIT_RAD_S", f32(safety["speed_limit"]), "disarm beyond this base speed [rad/s]"),
         ("ROD_HEARTBEAT_TIMEOUT_S", f32(safety["heartbeat_timeout"]), "default host-silence limit [s]"),
+        ("ROD_TRIM_HOLD_K", f32(trim.hold_k), f"held-torque low-pass, {p['trim']['hold_time_constant']:g} s, per period [-]"),
+        ("ROD_TRIM_RATE", f32(trim.rate),
+         f"set-point trim per N m beyond the band, per period [rad/(N m)]: {p['trim']['time_constant']:g} s on the "
+         f"design model (G = {trim.torque_per_offset:.4g} N m/rad)"),
+        ("ROD_TRIM_BAND_NM", f32(trim.band), "steady torque the trim leaves alone [N m]"),
+        ("ROD_TRIM_GATE_RAD", f32(trim.gate), "trims only with every estimated angle within this of upright [rad]"),
+        ("ROD_TRIM_MAX_RAD", f32(trim.limit), "|trim| ceiling [rad]"),
     ]
     width = max(len(n) for n, _, _ in macros) + 1
     lines = [
@@ -119,7 +128,8 @@ def header_text(d: Design, command: str) -> str:
         f" * Sampled closed-loop spectral radius: {d.checks['closed_loop_spectral_radius']:.6f}",
         " *",
         " * Loop (deviation z = x - upright, x = [theta_1..N, rates], theta = pi upright):",
-        " *   z_pred = Ad z + Bd u_prev;  z = z_pred + L (y - z_pred[0]);  u = -K z   [N m]",
+        " *   z_pred = Ad z + Bd (u_prev + w);  e = y - z_pred[0];  z = z_pred + L e;",
+        " *   w = ROD_W_DECAY w + ROD_L_DISTURBANCE e;  u = -K z - w   [N m]",
         " */",
         "#ifndef ROD_GAINS_H",
         "#define ROD_GAINS_H",
@@ -136,6 +146,7 @@ def header_text(d: Design, command: str) -> str:
         f"#define ROD_K_INIT {_vector(d.K)}",
         f"#define ROD_L_INIT {_vector(d.L)}",
         f"#define ROD_L_DISTURBANCE {f32(d.Lw)}  /* gain of the base-torque disturbance estimate w [N m/rad]; u = -K z - w */",
+        f"#define ROD_W_DECAY {f32(d.w_decay)}  /* w_pred = this * w per period: a passing torque (1: a random walk) [-] */",
         "",
         "#endif /* ROD_GAINS_H */",
         "",

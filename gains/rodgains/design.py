@@ -8,6 +8,7 @@ Firmware loop (current-estimate form), all in deviation z = x - x_upright:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -87,6 +88,7 @@ class Design:
     observer_form: str = OBSERVER_FORM
     checks: dict = field(default_factory=dict)
     Lw: float = 0.0  # gain of the estimated base-torque disturbance w [N m/rad]; u = -K z - w
+    w_decay: float = 1.0  # w_pred = w_decay w per period [-] (1: a random walk, < 1: a passing torque)
 
     @property
     def N(self) -> int:
@@ -94,12 +96,12 @@ class Design:
 
     def observer_matrices(self):
         """(Ao, Bo, Co, K, L) of the firmware's estimator with the disturbance state w appended:
-        z_pred = Ad z + Bd (u_prev + w), w_pred = w; u = -K z - w."""
+        z_pred = Ad z + Bd (u_prev + w), w_pred = w_decay w; u = -K z - w."""
         n = 2 * self.N
         Ao = np.zeros((n + 1, n + 1))
         Ao[:n, :n] = self.Ad
         Ao[:n, n:] = self.Bd
-        Ao[n, n] = 1.0
+        Ao[n, n] = self.w_decay
         Bo = np.vstack([self.Bd, [[0.0]]])
         Co = np.hstack([self.C, [[0.0]]])
         Ko = np.hstack([self.K, [[1.0]]])
@@ -213,11 +215,15 @@ def design(p: Params) -> Design:
         Qd, Rd, Nd = sampled.sampled_cost(A, B, Q, R, dt)
         Wd = sampled.sampled_process_noise(A, W, dt)
         L, _ = sampled.kalman_current(Ad, C, Wd, V / dt)
-        Lw = 0.0
-        qw = p["observer"]["process_noise_torque"]
-        if qw > 0:  # a random-walk torque at the base, estimated with the rod (the firmware cancels it)
+        Lw, w_decay = 0.0, 1.0
+        qw, tau = p["observer"]["process_noise_torque"], p["observer"]["disturbance_time_constant"]
+        if qw > 0:
+            # a torque at the base the rod feels beyond the command (friction, k_t error, a push),
+            # estimated with the rod and cancelled by the LQR: a random walk, or with a time constant
+            # a passing one, which leaves a steady torque to the set-point trim (gains/rodgains/trim.py)
             n = 2 * N
-            Aa = np.block([[Ad, Bd], [np.zeros((1, n)), np.ones((1, 1))]])
+            w_decay = math.exp(-dt / tau) if tau > 0 else 1.0
+            Aa = np.block([[Ad, Bd], [np.zeros((1, n)), np.full((1, 1), w_decay)]])
             Ca = np.hstack([C, np.zeros((1, 1))])
             Wa = np.zeros((n + 1, n + 1))
             Wa[:n, :n] = Wd
@@ -231,7 +237,8 @@ def design(p: Params) -> Design:
     except (np.linalg.LinAlgError, ValueError) as e:
         raise DesignRefused(f"design refused: discrete Riccati equation failed ({e})") from None
 
-    d = Design(p, rod, dt, A, B, C, Ad, Bd, K, L, K_c, L_c, p["design"]["method"], checks=checks, Lw=Lw)
+    d = Design(p, rod, dt, A, B, C, Ad, Bd, K, L, K_c, L_c, p["design"]["method"], checks=checks, Lw=Lw,
+               w_decay=w_decay)
     if d.method == "robust":  # the LQG gains refined to hold a family of rods (robust_design.py)
         from .robust_design import refine
 

@@ -55,6 +55,8 @@ def _choice(*options):
 
 
 PLANT_MODELS = ("der", "inextensible")
+GEARBOX_MODELS = ("compliant", "rigid")
+ENCODER_LOCATIONS = ("motor", "output")
 PLANT_MAX_EDGES = 200  # the simulated plant's discretization; beyond this a run costs minutes per second
 
 SCHEMA: dict[str, dict[str, Key]] = {
@@ -67,6 +69,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "youngs_modulus": Key(float, "Pa", _positive),
         "damping": Key(float, "N m s/rad", _nonneg),
         "gravity": Key(float, "m/s^2", _nonneg),
+        # a rod that is not straight at rest (simulated plant only): uniform curvature of the free length
+        "rest_curvature": Key(float, "1/m", _between(-20.0, 20.0), default=0.0),
     },
     "motor": {
         "gear_ratio": Key(float, "-", _positive),
@@ -78,11 +82,24 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "viscous_friction": Key(float, "N m s/rad", _nonneg),
         "coulomb_friction": Key(float, "N m", _nonneg),
         "design_includes_motor": Key(bool, "-"),
+        # the winding's inductance (simulated plant only): the current lags the voltage by L / R
+        "inductance": Key(float, "H", _between(0.0, 0.05), default=7.0e-4),
+    },
+    # Between the motor (and its encoder) and the rod (simulated plant only; docs/plant.md)
+    "gearbox": {
+        "model": Key(str, "-", _choice(*GEARBOX_MODELS), default="compliant"),
+        "backlash_deg": Key(float, "deg", _between(0.0, 10.0), default=1.0),
+        "stiffness": Key(float, "N m/rad", _between(1.0, 1.0e5), default=60.0),
+        "damping": Key(float, "N m s/rad", _between(0.0, 1.0), default=0.002),
+        "output_inertia": Key(float, "kg m^2", _between(0.0, 1.0e-3), default=5.0e-7),
+        "output_friction_share": Key(float, "-", _between(0.0, 1.0), default=0.1),
     },
     "plant": {
         "model": Key(str, "-", _choice(*PLANT_MODELS)),
         "edges": Key(int, "-", _between(2, PLANT_MAX_EDGES)),
         "hub_length": Key(float, "m", _nonneg),
+        # the control interrupt's jitter: the encoder read and the new duty come up to this late [us]
+        "isr_jitter_us": Key(float, "us", _between(0.0, 500.0), default=0.0),
     },
     "driver": {
         "supply_voltage": Key(float, "V", _between(4.5, 36.0)),
@@ -93,6 +110,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "encoder": {
         "counts_per_motor_rev": Key(int, "-", _between(1, 100000)),
         "rate_bandwidth_hz": Key(float, "Hz", _positive),
+        # where the boot zero really is (simulated plant only): the encoder reads the angle plus this
+        "zero_error_deg": Key(float, "deg", _between(-5.0, 5.0), default=0.18),
+        # where the encoder is (simulated plant only): on the motor, before the gearbox, or on the output shaft
+        "location": Key(str, "-", _choice(*ENCODER_LOCATIONS), default="motor"),
     },
     "loop": {
         "rate_hz": Key(float, "Hz", _between(100, 10000)),
@@ -121,6 +142,16 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "process_noise_rate": Key(float, "rad^2/s^3", _nonneg),
         "measurement_noise": Key(float, "rad^2 s", _positive),
         "process_noise_torque": Key(float, "(N m)^2/s", _nonneg),
+        # the estimated torque w passes with this time constant (0: a random walk that never does)
+        "disturbance_time_constant": Key(float, "s", _between(0.0, 100.0), default=0.0),
+    },
+    # the balance set-point trim (firmware/src/core/rod_trim.h): upright found from the holding torque
+    "trim": {
+        "time_constant": Key(float, "s", _between(0.0, 100.0), default=2.0),
+        "band": Key(float, "N m", _between(0.0, 0.05), default=0.001),
+        "hold_time_constant": Key(float, "s", _between(0.001, 10.0), default=0.2),
+        "gate_deg": Key(float, "deg", _between(0.1, 30.0), default=3.0),
+        "limit_deg": Key(float, "deg", _between(0.0, 30.0), default=5.0),
     },
     "swing_up": {
         "amplitude": Key(float, "N m", _nonneg),  # range: check_firmware_limits
@@ -372,10 +403,16 @@ class Params:
 
     # --- motor and driver at the output shaft ---------------------------------------
     @property
-    def base_inertia(self) -> float:
-        """Reflected rotor inertia J_rotor G^2 at the output shaft [kg m^2]."""
+    def rotor_inertia_out(self) -> float:
+        """Reflected rotor inertia J_rotor G^2 at the output shaft [kg m^2]: the gearbox's motor side."""
         m = self.values["motor"]
         return m["rotor_inertia"] * m["gear_ratio"] ** 2
+
+    @property
+    def base_inertia(self) -> float:
+        """Everything that turns with the shaft when the gearbox is taken as rigid [kg m^2]: the reflected
+        rotor J_rotor G^2 and the gearbox's output side (output shaft, last gear, hub)."""
+        return self.rotor_inertia_out + self.values["gearbox"]["output_inertia"]
 
     @property
     def base_friction(self) -> float:

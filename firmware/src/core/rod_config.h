@@ -13,12 +13,12 @@
 /* ---- the header's layout ---------------------------------------------------------------- */
 
 /* The macro set this firmware was written against (gains/codegen.py HEADER_SCHEMA_VERSION). */
-#define ROD_GAINS_SCHEMA_EXPECTED 2
+#define ROD_GAINS_SCHEMA_EXPECTED 3
 
 #ifndef ROD_GAINS_SCHEMA_VERSION
 #error "rod_gains.h has no ROD_GAINS_SCHEMA_VERSION: regenerate it with `rodctl gains`"
 #elif ROD_GAINS_SCHEMA_VERSION != ROD_GAINS_SCHEMA_EXPECTED
-#error "rod_gains.h has a different ROD_GAINS_SCHEMA_VERSION than this firmware expects (2): regenerate it with the rodctl of this checkout (`rodctl gains`)"
+#error "rod_gains.h has a different ROD_GAINS_SCHEMA_VERSION than this firmware expects (3): regenerate it with the rodctl of this checkout (`rodctl gains`)"
 #endif
 
 #if !defined(ROD_N) || !defined(ROD_NX) || !defined(ROD_LOOP_PERIOD_US) || !defined(ROD_DT_S) \
@@ -31,7 +31,9 @@
     || !defined(ROD_CATCH_ANGLE_RAD) || !defined(ROD_ANGLE_LIMIT_RAD) || !defined(ROD_SPEED_LIMIT_RAD_S) \
     || !defined(ROD_HEARTBEAT_TIMEOUT_S) || !defined(ROD_GAINS_SHA256_BYTES_INIT) \
     || !defined(ROD_AD_INIT) || !defined(ROD_BD_INIT) || !defined(ROD_K_INIT) || !defined(ROD_L_INIT) \
-    || !defined(ROD_L_DISTURBANCE)
+    || !defined(ROD_L_DISTURBANCE) || !defined(ROD_W_DECAY) \
+    || !defined(ROD_TRIM_HOLD_K) || !defined(ROD_TRIM_RATE) || !defined(ROD_TRIM_BAND_NM) \
+    || !defined(ROD_TRIM_GATE_RAD) || !defined(ROD_TRIM_MAX_RAD)
 #error "rod_gains.h lacks a macro the firmware needs: regenerate it with `rodctl gains`"
 #endif
 

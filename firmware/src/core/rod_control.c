@@ -24,6 +24,7 @@ void rod_control_init(rod_control_t *c)
     c->settings.decimation = 1;
     rod_angle_from_count(0, &c->angle);
     rod_rate_filter_init(&c->filter, 0);
+    rod_trim_init(&c->trim);
 }
 
 /* ---- commands ---------------------------------------------------------------------------- */
@@ -203,8 +204,26 @@ static bool try_catch(rod_control_t *c)
         return false;
     }
     c->upright_turn = c->angle.turn;
-    rod_observer_init(&c->obs, c->angle.from_upright, c->rate);
+    rod_trim_catch(&c->trim);
+    rod_observer_init(&c->obs, c->angle.from_upright - c->trim.trim, c->rate);
     c->mode = ROD_MODE_BALANCE;
+    return true;
+}
+
+/* The balance's measurement: theta_1 from the upright the trim found. */
+static float balance_measurement(const rod_control_t *c)
+{
+    return rod_angle_from_upright_of(&c->angle, c->upright_turn) - c->trim.trim;
+}
+
+/* Near upright and slow, where a steady torque can only be holding the rod off upright. */
+static bool quasi_static(const rod_control_t *c)
+{
+    for (int i = 0; i < ROD_N; i++) {
+        if (!(fabsf(c->obs.z[i]) <= ROD_TRIM_GATE_RAD)) {
+            return false;
+        }
+    }
     return true;
 }
 
@@ -221,7 +240,7 @@ static float control_law(rod_control_t *c)
         return rod_swingup_torque(&c->swing, c->settings.swing_amplitude, c->settings.swing_angle,
                                   c->angle.from_bottom, c->rate);
     case ROD_MODE_BALANCE:
-        return rod_observer_step(&c->obs, rod_angle_from_upright_of(&c->angle, c->upright_turn));
+        return rod_observer_step(&c->obs, balance_measurement(c));
     case ROD_MODE_IDENTIFY: {
         bool done;
         float u = rod_identify_torque(&c->ident, &done);
@@ -262,6 +281,7 @@ void rod_control_step(rod_control_t *c, const rod_inputs_t *in, uint32_t heartbe
             drive.torque = 0.0f;
         } else if (c->mode == ROD_MODE_BALANCE) {
             rod_observer_hold(&c->obs, drive.torque - friction);
+            rod_trim_update(&c->trim, drive.torque - friction, quasi_static(c));
         }
     }
 

@@ -36,6 +36,7 @@
 #include "rod_io.h"
 #include "rod_observer.h"
 #include "rod_swingup.h"
+#include "rod_trim.h"
 #include "rod_protocol_defs.h"
 
 #ifdef __cplusplus
@@ -65,6 +66,7 @@ typedef struct {
 
     /* balance */
     rod_observer_t obs;
+    rod_trim_t trim; /* where the rod stands upright, found from the torque (rod_trim.h) */
     rod_swingup_t swing;
     int32_t upright_turn; /* the upright being balanced: pi + 2 pi upright_turn */
 

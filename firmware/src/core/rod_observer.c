@@ -53,7 +53,7 @@ float rod_observer_step(rod_observer_t *o, float y)
     float zp[ROD_NX];
     predict(o->z, o->u_prev + o->w, zp);
     const float innovation = y - zp[0];
-    o->w = fmaf(ROD_L_DISTURBANCE, innovation, o->w);
+    o->w = fmaf(ROD_L_DISTURBANCE, innovation, ROD_W_DECAY * o->w);
     float fb = o->w;
     /* x - x is 0 for every finite x and NaN otherwise, so `check` stays 0 exactly while the
      * whole estimate is finite, without a branch per entry. */

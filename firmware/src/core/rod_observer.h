@@ -1,12 +1,13 @@
 /* rod_observer.h -- the balance estimator and LQR feedback (current-estimate form).
  *
  * Deviation coordinates z = x - x_upright, x = [theta_1..N, rates], measurement
- * y = theta_1 - upright. Each period:
- *     z_pred = Ad z + Bd (u_prev + w);   e = y - z_pred[0];   z = z_pred + L e;   w += Lw e
- *     u = -K z - w
+ * y = theta_1 - upright (the set-point trim taken off, rod_trim.h). Each period:
+ *     z_pred = Ad z + Bd (u_prev + w);   e = y - z_pred[0];   z = z_pred + L e
+ *     w = ROD_W_DECAY w + Lw e;   u = -K z - w
  * w is a torque the rod feels at the base beyond the command (the gearbox's dry friction, a
- * torque-constant error, a steady push): estimated as a random walk and cancelled.
- * with the tables of rod_gains.h (designed for exactly this form and ZOH at the loop rate).
+ * torque-constant error, a push), cancelled: a random walk (ROD_W_DECAY 1) or a passing torque,
+ * which leaves a steady torque to the trim. The tables come from rod_gains.h (designed for
+ * exactly this form and ZOH at the loop rate).
  */
 #ifndef ROD_OBSERVER_H
 #define ROD_OBSERVER_H

@@ -32,7 +32,9 @@ TOLERANCE = 0.01  # 1 %
 
 
 def _plant(p: Params, model: str, edges: int, **kw) -> Plant:
+    """The rod of the faithful plant on a rigid shaft: these studies measure the rod's discretization."""
     q = p.with_overrides(f'plant.model="{model}"', f"plant.edges={edges}")
+    kw.setdefault("gear", None)
     return faithful_plant(q, input_mode="torque", **kw)
 
 

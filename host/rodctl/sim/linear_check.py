@@ -2,10 +2,12 @@
 spectral radius at the robustness matrix's parameter corners (`rodctl gains --report`).
 
 A linear check only: the plant is linearized about its upright equilibrium (the DER compressed by
-its weight), without Coulomb friction, current limit or quantization, and the firmware's
-estimator (with its disturbance state) and LQR close the loop at the loop rate. A radius above 1
-at a corner means that case cannot be balanced even from a small offset; below 1 says nothing about
-30 deg starts or swing-up (the matrix runs those).
+its weight), without Coulomb friction, current limit or quantization, with its gearbox (the motor
+side, the gear train's stiffness, the teeth in contact: backlash has no linearization) and the
+winding's current lag, the encoder on the motor; the firmware's estimator (with its disturbance
+state) and LQR close the loop at the loop rate. A radius above 1 at a case means that case cannot
+be balanced even from a small offset once nothing dry holds the rod; below 1 says nothing about 30 deg
+starts, swing-up or the gap (the matrix runs those).
 """
 
 from __future__ import annotations
@@ -13,14 +15,16 @@ from __future__ import annotations
 import numpy as np
 
 from rodgains import sampled
+from rodgains.buckling import clamped_ratio
 from rodgains.design import Design
+from rodgains.trim import trim_gains
 
 from rodctl.sim import convergence, matrix
 from rodctl.sim.plant import Plant, faithful_plant
 
 LINEAR_CASES = ("E+15", "E-15", "rho+15", "rho-15", "damping*0.1", "damping*10", "viscous*3", "J+30", "J-30",
                 "kt+15", "kt-15", "L+3", "L-3", "delay+1", "inext10", "inext20", "inext40", "der10", "der20",
-                "der40")
+                "der40", "gear20", "gear200", "lag0.75")
 # The DER's stretching modes carry no damping (the rod's damping acts on bending rates): they sit on
 # the unit circle, so radii within this of 1 are marginal, not unstable.
 MARGINAL = 1e-6
@@ -34,26 +38,40 @@ def _radius(M: np.ndarray) -> float:
     return float(off.max()) if off.size else 1.0
 
 
-def loop_radius(d: Design, plant_p, delay_periods: int = 0, actuator_gain: float = 1.0) -> float:
-    """Spectral radius of the sampled loop: faithful plant of plant_p (linearized upright, torque
-    input, no dry friction) with d's estimator and LQR."""
-    pl = faithful_plant(plant_p, input_mode="torque")
-    pl = Plant(plant_p, kind=pl.kind, edges=pl.N - 1, input_mode="torque", hub_length=pl.hub, coulomb=0.0)
+def linear_plant(plant_p) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A, B, C) of the faithful plant of plant_p linearized upright: torque input through the winding's
+    current lag (L / R), no dry friction, the gear teeth in contact, output the encoder's angle."""
+    pl = faithful_plant(plant_p, input_mode="torque", coulomb=0.0)
+    if pl.config.backlash > 0:
+        pl = pl.twin(backlash=0.0)
     A, B = convergence.linearization(pl, upright=True)
-    n = A.shape[0] // 2
+    n = A.shape[0]
+    C = np.zeros((1, n))
+    C[0, pl.encoder_index] = 1.0
+    L, R = plant_p["motor"]["inductance"], plant_p["motor"]["resistance"]
+    if L > 0:  # the torque follows the command through the current's first-order lag
+        tau = L / R
+        A = np.block([[A, B], [np.zeros((1, n)), np.full((1, 1), -1.0 / tau)]])
+        B = np.vstack([np.zeros((n, 1)), [[1.0 / tau]]])
+        C = np.hstack([C, [[0.0]]])
+    return A, B, C
+
+
+def loop_radius(d: Design, plant_p, delay_periods: int = 0, actuator_gain: float = 1.0) -> float:
+    """Spectral radius of the sampled loop: faithful plant of plant_p (linear_plant) with d's estimator
+    and LQR."""
+    A, B, C = linear_plant(plant_p)
     Ad, Bd = sampled.zoh(A, B, d.dt)
-    C = np.zeros((1, 2 * n))
-    C[0, 0] = 1.0
     Ao, Bo, Co, Ko, Lo = d.estimator()
     return _radius(sampled.closed_loop(Ad, Bd, C, Ko, Lo, Ad_obs=Ao, Bd_obs=Bo, actuator_gain=actuator_gain, C_obs=Co,
                                        delay=delay_periods))
 
 
-def corner_radii(d: Design) -> list[tuple[str, float]]:
-    """(name, spectral radius) for the nominal faithful plant, each linear case of the matrix and the
-    E x rho corners."""
+def corner_radii(d: Design) -> list[tuple[str, float, float]]:
+    """(name, spectral radius, clamped buckling ratio of its rod) for the nominal faithful plant, each
+    linear case of the matrix and the E x rho corners."""
     p = d.params
-    out = [("nominal", loop_radius(d, p))]
+    out = [("nominal", loop_radius(d, p), clamped_ratio(p))]
     for name in LINEAR_CASES:
         case = matrix.CASES[name]
         gain = 1.0
@@ -62,10 +80,11 @@ def corner_radii(d: Design) -> list[tuple[str, float]]:
             gain = float(overrides[0].split("*=")[1])
             overrides = []
         q = matrix.apply_overrides(p, overrides)
-        out.append((name, loop_radius(d, q, delay_periods=case.delay_periods, actuator_gain=gain)))
+        out.append((name, loop_radius(d, q, delay_periods=case.delay_periods, actuator_gain=gain),
+                    clamped_ratio(matrix.apply_overrides(p, case.plant_overrides))))
     for a, b in CORNERS:
         q = matrix.apply_overrides(p, matrix.CASES[a].plant_overrides + matrix.CASES[b].plant_overrides)
-        out.append((f"{a} & {b}", loop_radius(d, q)))
+        out.append((f"{a} & {b}", loop_radius(d, q), clamped_ratio(q)))
     return out
 
 
@@ -87,14 +106,27 @@ def report_lines(d: Design) -> list[str]:
         f"{1e3 * per_plant:.1f} ms ({100 * abs(per_plant - per_lim) / per_lim:.2f} % from N -> inf, {1e3 * per_lim:.1f} ms)",
         f"  design model: N = {d.N} equal edges, edge 1 ({1e3 * p['rod']['length'] / d.N:.1f} mm) clamped; first hanging "
         f"period {1e3 * per_design:.1f} ms ({100 * (per_design - per_lim) / per_lim:+.1f} % from the plant's limit)",
-        "Sampled loop on the faithful plant (linearized upright, no dry friction) at the matrix's corners",
-        "(largest |z| off the unit circle: the DER's stretching modes are undamped and sit on it):",
+        "Sampled loop on the faithful plant (linearized upright, no dry friction, the gearbox's teeth in contact,",
+        "the winding's current lag) at the matrix's corners (largest |z| off the unit circle: the DER's",
+        "stretching modes are undamped and sit on it); L/Lc: the rod above the hub over its clamped buckling length:",
     ]
-    worst = 0.0
-    for name, rho in corner_radii(d):
-        worst = max(worst, rho)
-        flag = "  <- WARNING: unstable (> 1)" if rho > 1.0 else ""
-        lines.append(f"  {name:22s} spectral radius {rho:.6f}{flag}")
-    if worst > 1.0:
-        lines.append("  WARNING: the design does not stabilize every corner of the matrix even linearly")
+    unstable, in_range = [], []
+    for name, rho, ratio in corner_radii(d):
+        past = ratio >= 1.0
+        if rho > 1.0:
+            flag = "  <- unstable: past its buckling length" if past else "  <- WARNING: unstable (> 1)"
+            (unstable if past else in_range).append(name)
+        else:
+            flag = "  (past its buckling length)" if past else ""
+        lines.append(f"  {name:22s} spectral radius {rho:.6f}  L/Lc {ratio:.3f}{flag}")
+    if in_range:
+        lines.append(f"  WARNING: the design does not hold {', '.join(in_range)} even linearly, and nothing dry may")
+    elif unstable:
+        lines.append(f"  every case the loop cannot hold linearly ({', '.join(unstable)}) is past its clamped buckling "
+                     "length: the matrix labels those runs, it does not count them as passed")
+    g = trim_gains(d)
+    if g.rate:
+        lines.append(f"Set-point trim (firmware/src/core/rod_trim.h): {p['trim']['time_constant']:g} s on the design model, "
+                     f"G = {g.torque_per_offset:.4g} N m per rad of zero error; band {1e3 * g.band:g} mN m, the steady torque that "
+                     "keeps the rod on one flank of the gearbox's play (docs/control.md)")
     return lines

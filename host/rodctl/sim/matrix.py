@@ -34,6 +34,7 @@ BALANCE_START_DEG = 30.0
 SETTLE_DEG = 1.0  # the nominal goal band [deg]
 ROBUST_BAND_DEG = 3.0  # every case: every link within this at the end [deg]
 FINAL_WINDOW_S = 0.5  # "at the end": the largest deviation over the last this many seconds [s]
+HELD_WINDOW_S = 4.0  # held_fraction: the share of this last stretch the rod spends within the band [s]
 DEFAULT_SECONDS = {"balance": 6.0, "swingup": 14.0}
 # nominal goals
 BALANCE_SETTLE_GOAL_S = 1.5
@@ -44,6 +45,16 @@ SWINGUP_TURNS_GOAL = 1.0
 SWINGUP_CATCH_LIMIT_S = 10.0
 
 MODE_BALANCE, MODE_SWING_UP, MODE_FAULT = 1, 2, 3
+
+# The curved rod: a uniform rest curvature [1/m] that puts the tip of the Table I rod hanging at rest
+# CURVED_TIP_M to the side (gravity straightens it: the same curvature without gravity gives 8.6 mm;
+# tests/test_plant_gearbox.py measures it).
+CURVED_TIP_M = 0.005
+CURVED_REST_CURVATURE = 0.82
+LAG_075_INDUCTANCE = 0.75e-3 * 2.4  # [H]: L / R = 0.75 ms on the 2.4 ohm winding
+# Cases the linear check flags for the default design (sampled-loop radius > 1 without dry friction,
+# `rodctl gains --report`), run again with no Coulomb friction at all.
+NO_FRICTION_CASES = ("E-15", "rho+15")
 
 
 @dataclass(frozen=True)
@@ -95,15 +106,60 @@ def _cases() -> dict[str, Case]:
         for n in (10, 20, 40):
             c.append(Case(f"{tag}{n}", f"{model} plant, {n} edges beyond the hub",
                           (f'plant.model="{model}"', f"plant.edges={n}")))
+    # what a real rig adds between the encoder and the rod (docs/plant.md, "The gearbox")
+    for gap in (0.0, 0.5, 2.0, 3.0):
+        c.append(Case(f"backlash{gap:g}", f"{gap:g} deg of gearbox backlash (nominal 1)", (f"gearbox.backlash_deg={gap}",)))
+    for k in (20.0, 200.0):
+        c.append(Case(f"gear{k:g}", f"gear train stiffness {k:g} N m/rad (nominal 60)", (f"gearbox.stiffness={k}",)))
+    for sign in ("+", "-"):
+        c.append(Case(f"zero{sign}0.5", f"encoder zero {sign}0.5 deg off (nominal: half a count)",
+                      (f"encoder.zero_error_deg={sign}0.5",)))
+    c.append(Case("curved", f"a rod curved at rest: the hanging tip {1e3 * CURVED_TIP_M:g} mm off",
+                  (f"rod.rest_curvature={CURVED_REST_CURVATURE}",)))
+    c.append(Case("lag0.75", "1.8 mH: a 0.75 ms current lag on the 2.4 ohm winding (nominal 0.29 ms)",
+                  (f"motor.inductance={LAG_075_INDUCTANCE}",)))
+    c.append(Case("jitter100", "the control interrupt up to 100 us late", ("plant.isr_jitter_us=100.0",)))
+    # no dry friction where the sampled loop is unstable without it (sim/linear_check.py): a pass must
+    # not rest on Coulomb friction holding a leaning rod
+    for name in NO_FRICTION_CASES:
+        base = {x.name: x for x in c}[name]
+        c.append(Case(f"{name},coulomb*0", f"{base.title}, no Coulomb friction",
+                      base.plant_overrides + ("motor.coulomb_friction*=0",)))
     return {x.name: x for x in c}
 
 
 CASES: dict[str, Case] = _cases()
-# (case, task) the default design does not pass, and why (README "Where the paper's design fails");
-# tests/test_robustness_matrix.py expects exactly these to fail.
-KNOWN_FAILURES: dict[tuple[str, str], str] = {}
-# Empty since the stiff shaft (lqr.q_shaft_angle, README "A stiffer shaft"): the previous weights,
-# docs/tuned/low-ripple.toml, drop a rod 10x more damped than its model in both tasks.
+# (case, task) the default design does not pass, and why (docs/control.md "What the matrix shows").
+# Every other run is expected to pass, but with the gearbox's play the rod rests on one flank and now
+# and then crosses to the other (docs/control.md "Finding upright"): a run that ends during a
+# crossing ends outside the band, so tests/test_robustness_matrix.py holds those to a pass share,
+# not one by one.
+# The rig with an ideal gearbox (no play, no compliance, an exact boot zero, no current lag) and the
+# design tuned for it (no set-point trim, the paper's 30 deg catch): the limit the faithful plant
+# reduces to (tests/test_plant_gearbox.py). Mechanisms that were measured on it (the identified rigs'
+# friction compensation, the robust refinement, the stiff shaft) are tested there, where the
+# gearbox's play does not swamp what they change.
+IDEAL_GEARBOX = ('gearbox.model="rigid"', "encoder.zero_error_deg=0.0", "motor.inductance=0.0",
+                 "gearbox.output_inertia=0.0", "trim.time_constant=0.0", "swing_up.catch_angle_deg=30.0")
+
+_LINEARLY = "the sampled loop is unstable without dry friction on the faithful plant (rodctl gains --report)"
+_PLAY = "the gearbox's play: the rod leans on a flank a wider gap puts further out (docs/control.md)"
+KNOWN_FAILURES: dict[tuple[str, str], str] = {
+    **{(c, t): _LINEARLY for c in ("E-15", "rho+15", "E-15,coulomb*0", "rho+15,coulomb*0") for t in TASKS},
+    **{("L+3", t): "3 % longer: 0.97 x the clamped buckling length with the gearbox's play; it bends over"
+       for t in TASKS},
+    **{(c, t): _PLAY for c in ("backlash2", "backlash3") for t in TASKS},
+    **{("zero-0.5", t): "a boot zero 0.5 deg off: the trim walks it out only slowly across the play "
+       "(4 to 6 deg at the end)" for t in TASKS},
+    **{("curved", t): "a rod curved at rest has no straight upright: its own zero-moment shape leans 6 deg "
+       "(docs/plant.md)" for t in TASKS},
+    ("damping*10", "balance"): "ten times the damping slows the 30 deg release: the trim is still walking at the end",
+    ("dist+", "balance"): "the push lands the rod on the other flank 3 s before the end; the trim has not caught up",
+}
+# In-range runs (not KNOWN_FAILURES, rod short of its buckling length) the default design must pass, as
+# a share: the play makes each of them a coin flip near the band (docs/control.md, measured 47 of 59 with
+# the defaults, 31 to 47 with the trim's weights moved 10 %).
+MIN_PASS_SHARE = 0.7
 CASE_SETS: dict[str, tuple[str, ...]] = {
     "matrix": tuple(CASES),
     "nominal": ("nominal",),
@@ -242,6 +298,8 @@ def summarize(log: dict, task: str, strict: bool = False) -> dict[str, Any]:
     dt = float(t[1] - t[0]) if len(t) > 1 else 1e-3
     nfin = max(1, int(round(FINAL_WINDOW_S / dt)))
     final = float(dev[-nfin:].max())
+    nheld = max(1, int(round(HELD_WINDOW_S / dt)))
+    held = float(np.mean(dev[-nheld:] <= ROBUST_BAND_DEG)) if after[-nheld:].all() else 0.0
     outside = np.where(after & (dev > SETTLE_DEG))[0]
     if fault or final > SETTLE_DEG or not after.any():
         settle = math.inf
@@ -252,6 +310,7 @@ def summarize(log: dict, task: str, strict: bool = False) -> dict[str, Any]:
         "task": task,
         "settle_s": settle,
         "final_dev_deg": final,
+        "held_fraction": held,
         "max_dev_deg": float(dev[after].max()) if after.any() else float(dev.max()),
         "peak_torque_Nm": float(np.max(np.abs(log["torque"][after]))) if after.any() else 0.0,
         "caught_at_s": caught_at,

@@ -60,6 +60,7 @@ SIL_ABI_VERSION = 1
 MODE_NAMES = {0: "DISARMED", 1: "BALANCE", 2: "SWING_UP", 3: "FAULT", 4: "CATCH", 5: "IDENTIFY"}
 
 ROS2_ACCURACY = 0.1  # ROS2: h * omega_osc
+ROS2_GEAR_ACCURACY = 1.0  # ROS2: h * the gear train's own frequency (plant.choose_integrator)
 RK4_ACCURACY = 0.5  # RK4: h * omega_osc
 RK4_STABILITY = 2.0  # RK4: h * max|lambda| (its region reaches 2.78 on the real and 2.83 on the imaginary axis)
 VERLET_MARGIN = 1.0  # DER: h * omega_max (the stability bound is 2)
@@ -98,6 +99,16 @@ class _Config(ctypes.Structure):
         ("hub_damping", _D),
         ("coulomb", _D),
         ("coulomb_rate", _D),
+        ("gear_stiffness", _D),
+        ("gear_damping", _D),
+        ("backlash", _D),
+        ("output_inertia", _D),
+        ("output_viscous", _D),
+        ("inductance", _D),
+        ("zero_error", _D),
+        ("rest_curvature", _D),
+        ("encoder_on_shaft", ctypes.c_int32),
+        ("reserved", ctypes.c_int32),
     ]
 
 
@@ -115,7 +126,8 @@ class _RunOptions(ctypes.Structure):
         ("arm_mode", ctypes.c_int32),
         ("delay_periods", ctypes.c_int32),
         ("stop_on_mode", ctypes.c_int32),
-        ("reserved", ctypes.c_int32),
+        ("jitter_seed", ctypes.c_uint32),
+        ("jitter", _D),
     ]
 
 
@@ -131,6 +143,7 @@ class _RunLog(ctypes.Structure):
         ("current", _P(_D)),
         ("mode", _P(ctypes.c_int32)),
         ("count", _P(ctypes.c_int32)),
+        ("motor", _P(_D)),
     ]
 
 
@@ -182,13 +195,16 @@ def library() -> ctypes.CDLL:
         "rod_plant_encoder": (i32, [vp]),
         "rod_plant_set_external_torque": (None, [vp, _D]),
         "rod_plant_encoder_count": (i32, [vp, _D]),
+        "rod_plant_motor_state": (None, [vp, dp, dp, dp]),
+        "rod_plant_set_motor_state": (ctypes.c_int, [vp, _D, _D, _D]),
+        "rod_plant_gear_torque": (_D, [vp]),
         "rod_run_closed_loop": (ctypes.c_int64, [vp, _P(_SilApi), _P(_RunOptions), _P(_RunLog), _P(_RunResult)]),
     }
     for name, (res, args) in sig.items():
         f = getattr(lib, name)
         f.restype = res
         f.argtypes = args
-    if lib.rod_plant_api_version() != 2:
+    if lib.rod_plant_api_version() != 3:
         raise UserError("rod_plant library API version mismatch")
     return lib
 
@@ -236,8 +252,17 @@ class PlantConfig:
     hub_mass: float  # [kg]
     hub_stiffness: float  # joint between edge 1 and 2 [N m/rad]
     hub_damping: float  # [N m s/rad]
-    coulomb: float = 0.0  # Coulomb friction at the shaft [N m]
+    coulomb: float = 0.0  # Coulomb friction at the shaft (rigid) or the motor side (compliant gearbox) [N m]
     coulomb_rate: float = 0.01  # its tanh smoothing rate [rad/s]: below 80 % of breakaway the shaft creeps < 0.011 rad/s
+    gear_stiffness: float = 0.0  # gear train at the output [N m/rad]; 0: rigid (J, b, coulomb act on theta_1)
+    gear_damping: float = 0.0  # [N m s/rad] while the teeth touch
+    backlash: float = 0.0  # total gap at the output [rad]
+    output_inertia: float = 0.0  # rod side of the gearbox [kg m^2]
+    output_viscous: float = 0.0  # rod side's viscous friction [N m s/rad] (b is the motor side's when compliant)
+    inductance: float = 0.0  # winding inductance [H] (duty mode)
+    zero_error: float = 0.0  # the encoder reads the angle plus this [rad]
+    rest_curvature: float = 0.0  # the rod's curvature at rest [1/m]
+    encoder_on_shaft: bool = False  # the encoder reads theta_1 (an output-shaft encoder), not the motor side
 
     @property
     def back_emf_damping(self) -> float:
@@ -249,7 +274,35 @@ class PlantConfig:
                        self.EI, self.EA, self.d, self.g, self.J, self.b, self.kt_out, self.ke_out, self.resistance,
                        self.supply_voltage, self.current_limit, self.counts_per_rev, self.encoder_phase, max_step,
                        self.hub_length, self.hub_mass, self.hub_stiffness, self.hub_damping, self.coulomb,
-                       self.coulomb_rate)
+                       self.coulomb_rate, self.gear_stiffness, self.gear_damping, self.backlash, self.output_inertia,
+                       self.output_viscous, self.inductance, self.zero_error, self.rest_curvature,
+                       int(self.encoder_on_shaft), 0)
+
+    @property
+    def compliant(self) -> bool:
+        """A gearbox with a motor side of its own (the encoder reads it), else the rigid shaft."""
+        return self.gear_stiffness > 0.0
+
+
+@dataclass(frozen=True)
+class GearTrain:
+    """The gearbox between the motor (and its encoder) and the rod, at the output (SI units).
+
+    stiffness 0 is the rigid gearbox: everything turns with theta_1 and the encoder reads it."""
+
+    stiffness: float  # [N m/rad]
+    damping: float = 0.0  # [N m s/rad] while the teeth touch
+    backlash: float = 0.0  # total gap [rad]
+    output_inertia: float = 0.0  # rod side: output shaft, last gear, hub [kg m^2]
+    output_friction_share: float = 0.0  # part of the viscous friction on the rod side [-]
+
+    @classmethod
+    def from_params(cls, p: Params) -> "GearTrain":
+        g = p["gearbox"]
+        rigid = g["model"] == "rigid"
+        return cls(stiffness=0.0 if rigid else g["stiffness"], damping=0.0 if rigid else g["damping"],
+                   backlash=0.0 if rigid else math.radians(g["backlash_deg"]), output_inertia=g["output_inertia"],
+                   output_friction_share=g["output_friction_share"])
 
 
 class Plant:
@@ -269,12 +322,20 @@ class Plant:
     N), then `edges` flexible edges over the rest; N (the coordinates) is then edges + 1. Its joints
     carry the continuum's bending stiffness and damping per Voronoi length (see hub_joint).
     coulomb: Coulomb friction at the shaft [N m] (default 0: the paper's model has none).
+    gear: the gearbox (GearTrain; None: the rigid shaft carrying J and b). A compliant one gives the motor
+    side a coordinate of its own (the last raw coordinate), which the encoder reads; J is then the
+    reflected rotor alone (Params.rotor_inertia_out) and the Coulomb friction acts there.
+    inductance [H] (duty mode), zero_error [rad] (the encoder reads the angle plus it), rest_curvature
+    [1/m] (the rod's at rest), jitter [s] (run_closed_loop's default control-interrupt jitter),
+    encoder_on_shaft (the encoder reads theta_1, an output-shaft encoder, instead of the motor side).
     """
 
     def __init__(self, params: Params | None = None, *, kind: str = "inextensible", edges: int | None = None,
                  input_mode: str = "torque", phase: float = 0.5, J: float | None = None, b: float | None = None,
                  d: float | None = None, g: float | None = None, method: str = "auto", step: float | None = None,
-                 period: float | None = None, hub_length: float | None = None, coulomb: float = 0.0):
+                 period: float | None = None, hub_length: float | None = None, coulomb: float = 0.0,
+                 gear: GearTrain | None = None, inductance: float = 0.0, zero_error: float = 0.0,
+                 rest_curvature: float = 0.0, jitter: float = 0.0, encoder_on_shaft: bool = False):
         if kind not in KINDS:
             raise ValueError(f"kind must be one of {sorted(KINDS)}, got {kind!r}")
         if input_mode not in INPUTS:
@@ -299,15 +360,29 @@ class Plant:
                 raise ValueError(f"hub_length must be in [0, {L:g}) m")
             geo = hub_geometry(p, N, float(hub_length), d)
             N += 1
+        if gear is None:  # the rigid shaft: the whole motor on theta_1
+            gear_kw = {}
+            J_plant = rod.J if J is None else float(J)
+            b_plant = rod.b if b is None else float(b)
+        else:
+            b_total = rod.b if b is None else float(b)
+            share = gear.output_friction_share
+            gear_kw = dict(gear_stiffness=gear.stiffness, gear_damping=gear.damping, backlash=gear.backlash,
+                           output_inertia=gear.output_inertia, output_viscous=share * b_total)
+            J_plant = p.rotor_inertia_out if J is None else float(J)
+            b_plant = (1.0 - share) * b_total
+        self.gear = gear
+        self.jitter = float(jitter)
         self.config = PlantConfig(
             kind=kind, edges=N, input_mode=input_mode, l=geo["l"], m=geo["m"],
             EI=rod.EI, EA=p.EA, d=geo["d"], g=rod.g if g is None else float(g),
-            J=rod.J if J is None else float(J), b=rod.b if b is None else float(b),
+            J=J_plant, b=b_plant,
             kt_out=p.kt_out, ke_out=p.ke_out, resistance=p["motor"]["resistance"],
             supply_voltage=p["driver"]["supply_voltage"], current_limit=p["driver"]["current_limit"],
             counts_per_rev=float(p.counts_per_rev), encoder_phase=float(phase), hub_length=geo["hub_length"],
             hub_mass=geo["hub_mass"], hub_stiffness=geo["hub_stiffness"], hub_damping=geo["hub_damping"],
-            coulomb=float(coulomb))
+            coulomb=float(coulomb), inductance=float(inductance), zero_error=float(zero_error),
+            rest_curvature=float(rest_curvature), encoder_on_shaft=bool(encoder_on_shaft), **gear_kw)
         self._lib = library()
         cfg = self.config.to_c(1e-4, "verlet" if kind == "der" else "ros2")
         self._h = self._lib.rod_plant_new(ctypes.byref(cfg))
@@ -327,8 +402,52 @@ class Plant:
 
     def __repr__(self) -> str:
         c = self.config
-        return (f"Plant(kind={c.kind!r}, edges={c.edges}, input_mode={c.input_mode!r}, J={c.J:.3g}, b={c.b:.3g}, "
-                f"method={self.method!r}, step={self.step:.3g})")
+        gear = (f", gear=({c.gear_stiffness:g} N m/rad, {math.degrees(c.backlash):g} deg)" if c.compliant else "")
+        return (f"Plant(kind={c.kind!r}, edges={c.edges}, input_mode={c.input_mode!r}, J={c.J:.3g}, b={c.b:.3g}"
+                f"{gear}, method={self.method!r}, step={self.step:.3g})")
+
+    def twin(self, **changes) -> "Plant":
+        """A plant like this one with some PlantConfig fields changed (e.g. backlash=0.0), at rest hanging,
+        with this one's integrator where it has one."""
+        t = object.__new__(Plant)
+        t.params, t.hub, t.gear, t.jitter, t._lib = self.params, self.hub, self.gear, self.jitter, self._lib
+        t.config = replace(self.config, **changes)
+        method = getattr(self, "integrator", {}).get("method", "verlet" if self.kind == "der" else "ros2")
+        t._h = t._lib.rod_plant_new(ctypes.byref(t.config.to_c(1e-4, method)))
+        if not t._h:
+            raise ValueError(f"invalid plant configuration: {t.config}")
+        t.N, t.n = self.N, t._lib.rod_plant_size(t._h)
+        if hasattr(self, "integrator"):
+            t.integrator = self.integrator
+            t.step = self.step
+        t.set_state(np.zeros(t.N))
+        return t
+
+    @property
+    def motor_index(self) -> int:
+        """The raw coordinate of the motor side: the last (compliant gearbox) or theta_1 (rigid)."""
+        return self.n - 1 if self.config.compliant else 0
+
+    @property
+    def encoder_index(self) -> int:
+        """The raw coordinate the encoder reads: the motor side, or theta_1 for an output-shaft encoder."""
+        return 0 if self.config.encoder_on_shaft else self.motor_index
+
+    def motor_state(self) -> tuple[float, float, float]:
+        """(theta_m [rad], omega_m [rad/s], current [A]): the gearbox's motor side at the output (theta_1
+        when rigid) and the winding current."""
+        a, b, c = _D(), _D(), _D()
+        self._lib.rod_plant_motor_state(self._h, ctypes.byref(a), ctypes.byref(b), ctypes.byref(c))
+        return a.value, b.value, c.value
+
+    def set_motor_state(self, theta_m: float, omega_m: float = 0.0, current: float = 0.0) -> None:
+        _check(self._lib.rod_plant_set_motor_state(self._h, float(theta_m), float(omega_m), float(current)),
+               "set_motor_state")
+
+    @property
+    def gear_torque(self) -> float:
+        """The gear train's torque on the shaft now [N m] (0 in the gap or when rigid)."""
+        return self._lib.rod_plant_gear_torque(self._h)
 
     # --- configuration -------------------------------------------------------------------
     @property
@@ -508,7 +627,7 @@ class Plant:
         n2 = y0.size
         scale = np.ones(n2)
         if self.kind == "der":
-            scale[1:self.n] = self.config.l
+            scale[1:self.n - (1 if self.config.compliant else 0)] = self.config.l
         A = np.empty((n2, n2))
         for k in range(n2):
             e = np.zeros(n2)
@@ -530,6 +649,7 @@ def _elastic_max(plant: Plant, theta: float) -> float:
     n = plant.n
     scale = np.full(n, plant.config.l)
     scale[0] = 1.0
+    scale[plant.motor_index] = 1.0
     K = np.empty((n, n))
     for k in range(n):
         e = np.zeros(2 * n)
@@ -552,6 +672,8 @@ def choose_integrator(plant: Plant, method: str = "auto", period: float = 1e-3) 
     Every step is capped at 1 ms. Returns method, step and the frequencies used.
     """
     angles = (0.0, math.pi) if plant.config.g > 0 else (0.0,)
+    if plant.config.backlash > 0:  # the stiffest moments are the teeth in contact: judge the closed gap
+        plant = plant.twin(backlash=0.0)
     if plant.kind == "der":
         if method not in ("auto", "verlet"):
             raise ValueError(f"method {method!r}: the DER plant integrates with 'verlet'")
@@ -564,6 +686,13 @@ def choose_integrator(plant: Plant, method: str = "auto", period: float = 1e-3) 
     w_osc = max(_oscillatory_max_ev(ev) for ev in eig)
     rho = max(float(np.abs(ev).max()) for ev in eig)
     h_ros2 = min(ROS2_ACCURACY / w_osc if w_osc > 0 else MAX_AUTO_STEP, MAX_AUTO_STEP)
+    if plant.config.compliant:
+        # the rod's modes as accurately as the rigid plant's; the gear train's own (the hub against its
+        # spring, thousands of rad/s) to ROS2_GEAR_ACCURACY: it carries little energy, and ROS2 is L-stable
+        rigid = plant.twin(gear_stiffness=0.0, gear_damping=0.0, J=plant.config.J + plant.config.output_inertia,
+                           output_inertia=0.0, b=plant.config.b + plant.config.output_viscous, output_viscous=0.0)
+        w_rod = max(_oscillatory_max_ev(np.linalg.eigvals(rigid.linearization(a))) for a in angles)
+        h_ros2 = min(ROS2_ACCURACY / w_rod if w_rod > 0 else MAX_AUTO_STEP, ROS2_GEAR_ACCURACY / w_osc, MAX_AUTO_STEP)
     h_rk4 = min(RK4_STABILITY / rho, RK4_ACCURACY / w_osc if w_osc > 0 else MAX_AUTO_STEP, MAX_AUTO_STEP)
     n_ros2, n_rk4 = math.ceil(period / h_ros2 - 1e-9), math.ceil(period / h_rk4 - 1e-9)
     if method == "auto":
@@ -594,10 +723,18 @@ def hub_geometry(p: Params, edges: int, hub_length: float, d: float | None = Non
 
 def faithful_plant(params: Params, *, input_mode: str = "duty", phase: float = 0.5, **kw) -> Plant:
     """The plant the parameter file's [plant] table describes (model, edges, hub_length), with the
-    physical motor (rotor inertia, viscous and Coulomb friction): what every pass/fail scenario judges."""
+    physical motor (rotor inertia, viscous and Coulomb friction, inductance), the [gearbox] between the
+    motor and the rod, the encoder's zero error, the rod's rest curvature and the interrupt's jitter:
+    what every pass/fail scenario judges (docs/plant.md). Keyword arguments override Plant's."""
     pp = params["plant"]
-    return Plant(params, kind=pp["model"], edges=pp["edges"], input_mode=input_mode, phase=phase,
-                 hub_length=pp["hub_length"], coulomb=params["motor"]["coulomb_friction"], **kw)
+    args = dict(kind=pp["model"], edges=pp["edges"], input_mode=input_mode, phase=phase,
+                hub_length=pp["hub_length"], coulomb=params["motor"]["coulomb_friction"],
+                gear=GearTrain.from_params(params), inductance=params["motor"]["inductance"],
+                zero_error=math.radians(params["encoder"]["zero_error_deg"]),
+                rest_curvature=params["rod"]["rest_curvature"], jitter=1e-6 * pp["isr_jitter_us"],
+                encoder_on_shaft=params["encoder"]["location"] == "output")
+    args.update(kw)
+    return Plant(params, **args)
 
 
 # --- controller (firmware SIL library) ---------------------------------------------------------
@@ -642,7 +779,8 @@ def _controller(sil) -> SilController:
 
 
 def run_closed_loop(plant: Plant, sil, periods: int, arm_mode: int = 0, delay_periods: int = 0, *,
-                    reset: bool = True, stop_on_mode: int | None = None) -> dict[str, Any]:
+                    reset: bool = True, stop_on_mode: int | None = None, jitter: float | None = None,
+                    jitter_seed: int = 1) -> dict[str, Any]:
     """Run the firmware controller (SIL library path, CDLL or SilController) against `plant` in C.
 
     Per period k: count = encoder(plant) -> cmd = rod_sil_step(count) -> [delay_periods = 1: the
@@ -655,8 +793,11 @@ def run_closed_loop(plant: Plant, sil, periods: int, arm_mode: int = 0, delay_pe
     (true, plant N), est (controller's status: theta-hat_1..Nc then rates, float32), torque_cmd
     (float32), duty (float32), torque and current (mean applied over the period), mode, count
     (int32); and scalars periods_run, nonfinite_commands, stopped_on_mode, period, controller_edges,
-    plant_edges. If the plant fails (its state left the model), SimulationError carries the log up
-    to and including the failed period. The SIL library has global state: one run at a time.
+    plant_edges; motor: the motor side's angle at each encoder read [rad] (theta_1 when rigid).
+    jitter [s] (default: the plant's): the encoder read and the new command come j_k late, j_k uniform in
+    [0, jitter) from the seeded sequence jitter_seed (reset=True restarts it). If the plant fails (its
+    state left the model), SimulationError carries the log up to and including the failed period. The
+    SIL library has global state: one run at a time.
     """
     ctl = _controller(sil)
     if plant.input_mode == "duty" and not ctl.has_duty:
@@ -678,13 +819,17 @@ def run_closed_loop(plant: Plant, sil, periods: int, arm_mode: int = 0, delay_pe
         "current": np.zeros(periods),
         "mode": np.zeros(periods, np.int32),
         "count": np.zeros(periods, np.int32),
+        "motor": np.zeros(periods),
     }
     log = _RunLog(_ptr(out["time"], _D), _ptr(out["theta"], _D), _ptr(out["dtheta"], _D),
                   _ptr(out["est"], ctypes.c_float), _ptr(out["torque_cmd"], ctypes.c_float),
                   _ptr(out["duty"], ctypes.c_float), _ptr(out["torque"], _D), _ptr(out["current"], _D),
-                  _ptr(out["mode"], ctypes.c_int32), _ptr(out["count"], ctypes.c_int32))
+                  _ptr(out["mode"], ctypes.c_int32), _ptr(out["count"], ctypes.c_int32), _ptr(out["motor"], _D))
+    jit = plant.jitter if jitter is None else float(jitter)
+    if not 0.0 <= jit < ctl.period:
+        raise ValueError(f"jitter must be in [0, {ctl.period:g}) s, got {jit!r}")
     opt = _RunOptions(periods, ctl.period, ne, int(bool(reset)), int(arm_mode), int(delay_periods),
-                      -1 if stop_on_mode is None else int(stop_on_mode), 0)
+                      -1 if stop_on_mode is None else int(stop_on_mode), int(jitter_seed) & 0xFFFFFFFF, jit)
     res = _RunResult()
     ret = plant._lib.rod_run_closed_loop(plant._h, ctypes.byref(ctl.api), ctypes.byref(opt), ctypes.byref(log),
                                          ctypes.byref(res))

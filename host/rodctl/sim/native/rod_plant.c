@@ -78,11 +78,19 @@ struct rod_plant {
     rod_plant_config cfg;
     int N;     /* edges */
     int n;     /* generalized coordinates */
+    int nr;    /* the rod's (n without the motor side) */
+    int im;    /* index of the motor side theta_m (n - 1) when the gearbox is compliant, else -1 */
+    double J_shaft, b_shaft; /* inertia and viscous friction on theta_1 (everything when rigid) */
+    double cur;              /* winding current [A]: the state with inductance, else the last step's */
+    double gear_c;           /* DER: the gear damping at the prepared q (0 inside the gap) */
+    double *kbar;            /* per joint: the discrete curvature 2 tan(phi/2) the spring rests at */
     double t;  /* time [s] */
     double *q; /* coordinates, n */
     double *v; /* rates, n */
     double last_torque, last_current;
     double pending; /* delayed input held by the runner */
+    double jit;     /* the runner's current jitter: the plant's time past the control grid [s] */
+    uint32_t rng;   /* the runner's jitter draws */
     int prepared;   /* DER: Fc and Cb hold the values at q */
     /* constants */
     double *lv;          /* edge lengths: hub_length, then l [m] */
@@ -149,6 +157,68 @@ static inline double coulomb(const rod_plant *p, double omega, double *slope)
     return tc * th;
 }
 
+/* The motor's torque over a step of h [s] at the motor rate omega. Without inductance it is motor().
+ * With it the current is a state: exact for the RL circuit with omega held over the step, so the
+ * torque is the step's mean current times kt (constant over the step; *slope = 0), and the state
+ * advances to the step's end. The driver's current regulation clamps both. */
+static double motor_step(rod_plant *p, double u, double omega, double h, double *current, double *slope)
+{
+    const rod_plant_config *k = &p->cfg;
+    if (k->input_mode == ROD_INPUT_TORQUE || !(k->inductance > 0.0)) {
+        const double T = motor(p, u, omega, current, slope);
+        p->cur = *current;
+        return T;
+    }
+    double duty = u;
+    if (duty > 1.0) duty = 1.0;
+    if (duty < -1.0) duty = -1.0;
+    const double iss = (duty * k->supply_voltage - k->ke_out * omega) / k->resistance;
+    const double x = h * k->resistance / k->inductance;
+    const double e = exp(-x);
+    const double frac = x > 1e-8 ? (1.0 - e) / x : 1.0 - 0.5 * x; /* mean of e^(-t) over the step */
+    const double lim = k->current_limit;
+    double mean = iss + (p->cur - iss) * frac, end = iss + (p->cur - iss) * e;
+    mean = mean > lim ? lim : (mean < -lim ? -lim : mean);
+    end = end > lim ? lim : (end < -lim ? -lim : end);
+    p->cur = end;
+    *current = mean;
+    *slope = 0.0;
+    return k->kt_out * mean;
+}
+
+static inline int has_lag(const rod_plant *p)
+{
+    return p->cfg.input_mode == ROD_INPUT_DUTY && p->cfg.inductance > 0.0;
+}
+
+/* The gear train's torque on the shaft [N m] for the motor-minus-shaft angle dm [rad] and rate dw
+ * [rad/s]; *k, *c: its stiffness and damping there, both 0 inside the gap. With no backlash the
+ * teeth always touch. */
+static inline double gear(const rod_plant *p, double dm, double dw, double *k, double *c)
+{
+    const double half = 0.5 * p->cfg.backlash;
+    double x;
+    if (!(half > 0.0)) x = dm;
+    else if (dm > half) x = dm - half;
+    else if (dm < -half) x = dm + half;
+    else {
+        *k = 0.0;
+        *c = 0.0;
+        return 0.0;
+    }
+    *k = p->cfg.gear_stiffness;
+    *c = p->cfg.gear_damping;
+    return *k * x + *c * dw;
+}
+
+static double gear_energy(const rod_plant *p, double dm)
+{
+    const double half = 0.5 * p->cfg.backlash;
+    double x = dm;
+    if (half > 0.0) x = dm > half ? dm - half : (dm < -half ? dm + half : 0.0);
+    return 0.5 * p->cfg.gear_stiffness * x * x;
+}
+
 double rod_plant_motor_torque(const rod_plant *p, double input, double omega, double *current)
 {
     double cur, slope;
@@ -201,12 +271,15 @@ HOT void rod_force(rod_plant *p, const int N, const double *s, const double *c, 
         const double sp = s[j + 1] * c[j] - c[j + 1] * s[j]; /* sin(phi_j) */
         const double t = sp / (1.0 + cp);                      /* tan(phi_j / 2) */
         const double tt = t * t;
-        const double f = 2.0 * ksj[j] * t * (1.0 + tt) + dj[j] * (w[j + 1] - w[j]);
+        const double kb = p->kbar[j];
+        const double f = ksj[j] * (2.0 * t - kb) * (1.0 + tt) + dj[j] * (w[j + 1] - w[j]);
         F[j] += f;
         F[j + 1] -= f;
-        if (kj) kj[j] = ksj[j] * (1.0 + tt) * (1.0 + 3.0 * tt);
+        if (kj) kj[j] = ksj[j] * (1.0 + tt) * (1.0 + 3.0 * tt - kb * t);
     }
-    F[0] += torque - p->cfg.b * w[0] - coulomb(p, w[0], NULL) + p->ext;
+    /* torque: the motor's (rigid) or the gear train's (compliant); the Coulomb friction sits on the
+     * motor side when there is one */
+    F[0] += torque - p->b_shaft * w[0] - (p->im < 0 ? coulomb(p, w[0], NULL) : 0.0) + p->ext;
 }
 
 /* y = M(theta) x in O(N): M_ij = l_i l_j c_max(i,j) (c_i c_j + s_i s_j) + J [i = j = 1]. */
@@ -229,19 +302,7 @@ HOT void rod_mass_mul(rod_plant *p, const int N, const double *s, const double *
         Pb += b[i];
         y[i] = lv[i] * (c[i] * (A[i] + cc[i] * Pa) + s[i] * (B[i] + cc[i] * Pb));
     }
-    y[0] += p->cfg.J * x[0];
-}
-
-/* Upper triangle of M(theta) (tests only: the step never forms M). */
-static void rod_mass_upper(const rod_plant *p, const double *s, const double *c, double *M)
-{
-    const int N = p->N;
-    for (int i = 0; i < N; i++) {
-        double *Mi = M + (size_t)i * N;
-        const double si = s[i] * p->lv[i], ci = c[i] * p->lv[i];
-        for (int j = i; j < N; j++) Mi[j] = p->cc[j] * p->lv[j] * (ci * c[j] + si * s[j]);
-    }
-    M[0] += p->cfg.J;
+    y[0] += p->J_shaft * x[0];
 }
 
 /* y = K x for the tridiagonal bending Hessian given per joint. */
@@ -392,23 +453,44 @@ HOT int rod_step_n(rod_plant *p, const int N, double u, double h, double *Tsum, 
     double *th = p->q, *w = p->v;
     double *s = p->s, *c = p->c, *kj = p->kj, *arm = p->arm;
     const double gh = ROD_GAMMA * h, *dj = p->dj;
-    double cur, slope, cslope;
+    const int m = p->im; /* the motor side (compliant gearbox), else -1 */
+    double cur, slope, cslope = 0.0;
 
-    /* stage 1 at y_n: factor S = M + gh D + gh^2 K (joint space) */
+    /* stage 1 at y_n: factor S = M + gh D + gh^2 K (joint space). A compliant gearbox adds the motor
+     * side's row, coupled to theta_1 alone: it is eliminated (Schur complement) into arm_1 and the
+     * right-hand side, and recovered after the rod's solve. */
     trig(th, s, c, N);
-    const double T1 = motor(p, u, w[0], &cur, &slope);
-    rod_force(p, N, s, c, w, T1, p->F, kj);
+    const double T1 = motor_step(p, u, m >= 0 ? w[m] : w[0], h, &cur, &slope);
+    double kk = 0.0, ce = 0.0, Fm = 0.0, Tshaft = T1;
+    if (m >= 0) {
+        Tshaft = gear(p, th[m] - th[0], w[m] - w[0], &kk, &ce);
+        Fm = T1 - Tshaft - p->cfg.b * w[m] - coulomb(p, w[m], &cslope);
+    }
+    rod_force(p, N, s, c, w, Tshaft, p->F, kj);
     node_positions(p, N, s, c, p->fS.P);
-    coulomb(p, w[0], &cslope);
-    arm[0] = p->cfg.J + gh * (p->cfg.b + slope + cslope);
+    if (m < 0) {
+        coulomb(p, w[0], &cslope);
+        arm[0] = p->J_shaft + gh * (p->b_shaft + slope + cslope);
+    } else {
+        arm[0] = p->J_shaft + gh * p->b_shaft;
+    }
     for (int k = 1; k < N; k++) arm[k] = gh * dj[k - 1] + gh * gh * kj[k - 1];
     double *k1q = p->k1q, *k1v = p->k1v, *k2q = p->k2q, *k2v = p->k2v, *tmp = p->r2, *us = p->ta2;
     joint_mul(kj, w, tmp, N);
     for (int i = 0; i < N; i++) k1v[i] = p->F[i] - gh * tmp[i];
+    double am = 1.0, sc = 0.0;
+    if (m >= 0) {
+        am = p->cfg.J + gh * (ce + p->cfg.b + slope + cslope) + gh * gh * kk;
+        sc = gh * ce + gh * gh * kk;
+        arm[0] += sc - sc * sc / am;
+        k1v[m] = Fm - gh * kk * (w[m] - w[0]);
+        k1v[0] += -gh * kk * (w[0] - w[m]) + sc / am * k1v[m];
+    }
     int err = aba_factor_pass(p, N, &p->fS, arm, k1v, us);
     if (err) return err;
     aba_forward(N, &p->fS, k1v, us);
-    for (int i = 0; i < N; i++) k1q[i] = w[i] + gh * k1v[i];
+    if (m >= 0) k1v[m] = (k1v[m] + sc * k1v[0]) / am;
+    for (int i = 0; i < p->n; i++) k1q[i] = w[i] + gh * k1v[i];
 
     /* stage 2 at y_n + h k1: acceleration M(theta*)^-1 F(theta*) */
     double *th2 = p->th2, *w2 = p->w2;
@@ -418,12 +500,22 @@ HOT int rod_step_n(rod_plant *p, const int N, double u, double h, double *Tsum, 
     }
     trig_shift(s, c, th, th2, p->s2, p->c2, N);
     for (int i = 0; i < N; i++) th2[i] += th[i];
-    double cur2, slope2;
-    const double T2 = motor(p, u, w2[0], &cur2, &slope2);
+    double cur2, slope2, a2m = 0.0;
     double *a2 = p->F2;
-    rod_force(p, N, p->s2, p->c2, w2, T2, a2, NULL);
+    if (m >= 0) {
+        const double thm = th[m] + h * k1q[m], wm = w[m] + h * k1v[m];
+        const double T2 = has_lag(p) ? T1 : motor(p, u, wm, &cur2, &slope2);
+        double k2, c2;
+        const double Tg = gear(p, thm - th2[0], wm - w2[0], &k2, &c2);
+        a2m = (T2 - Tg - p->cfg.b * wm - coulomb(p, wm, NULL)) / p->cfg.J;
+        rod_force(p, N, p->s2, p->c2, w2, Tg, a2, NULL);
+        k2q[m] = wm - 2.0 * k1q[m];
+    } else {
+        const double T2 = has_lag(p) ? T1 : motor(p, u, w2[0], &cur2, &slope2);
+        rod_force(p, N, p->s2, p->c2, w2, T2, a2, NULL);
+    }
     node_positions(p, N, p->s2, p->c2, p->fM.P);
-    arm[0] = p->cfg.J;
+    arm[0] = p->J_shaft;
     for (int k = 1; k < N; k++) arm[k] = 0.0;
     err = aba_factor_pass(p, N, &p->fM, arm, a2, us);
     if (err) return err;
@@ -436,8 +528,13 @@ HOT int rod_step_n(rod_plant *p, const int N, double u, double h, double *Tsum, 
     rod_mass_mul(p, N, s, c, a2, k2v);
     joint_mul(kj, k2q, tmp, N);
     for (int i = 0; i < N; i++) k2v[i] -= gh * tmp[i];
+    if (m >= 0) {
+        k2v[m] = p->cfg.J * (a2m - 2.0 * k1v[m]) - gh * kk * (k2q[m] - k2q[0]);
+        k2v[0] += -gh * kk * (k2q[0] - k2q[m]) + sc / am * k2v[m];
+    }
     aba_solve(N, &p->fS, k2v, us);
-    for (int i = 0; i < N; i++) {
+    if (m >= 0) k2v[m] = (k2v[m] + sc * k2v[0]) / am;
+    for (int i = 0; i < p->n; i++) {
         k2q[i] += gh * k2v[i];
         th[i] += h * (1.5 * k1q[i] + 0.5 * k2q[i]);
         w[i] += h * (1.5 * k1v[i] + 0.5 * k2v[i]);
@@ -449,16 +546,15 @@ HOT int rod_step_n(rod_plant *p, const int N, double u, double h, double *Tsum, 
 
 /* Classical RK4 for mildly stiff rods (the wrapper picks it when the whole spectrum fits RK4's
  * stability region at a step near the control period, e.g. Table I at N = 5: fastest mode
- * -537 rad/s, stable to h = 5 ms). Each stage: one O(N) articulated-body solve with M. */
-HOT int rod_accel_n(rod_plant *p, const int N, const double *s, const double *c, const double *w, double u,
-                    double *acc, aba_factor *f, double *T, double *cur)
+ * -537 rad/s, stable to h = 5 ms). Each stage: one O(N) articulated-body solve with M. Tshaft is
+ * the torque on theta_1 from the motor (rigid) or the gear train (compliant). */
+HOT int rod_accel_n(rod_plant *p, const int N, const double *s, const double *c, const double *w, double Tshaft,
+                    double *acc, aba_factor *f)
 {
-    double slope;
-    *T = motor(p, u, w[0], cur, &slope);
-    rod_force(p, N, s, c, w, *T, acc, NULL);
+    rod_force(p, N, s, c, w, Tshaft, acc, NULL);
     node_positions(p, N, s, c, f->P);
     double *arm = p->arm;
-    arm[0] = p->cfg.J;
+    arm[0] = p->J_shaft;
     for (int k = 1; k < N; k++) arm[k] = 0.0;
     const int err = aba_factor_pass(p, N, f, arm, acc, p->ta2);
     if (err) return err;
@@ -466,42 +562,84 @@ HOT int rod_accel_n(rod_plant *p, const int N, const double *s, const double *c,
     return ROD_OK;
 }
 
+/* One RK4 stage's accelerations at angles (s, c; the motor side at thm), rates w (motor side wm):
+ * the rod's in acc[0..N), the motor side's in *am. Tm: the motor torque when it is held over the
+ * step (inductance: held), else computed at the stage's rate. */
+HOT int rk4_stage(rod_plant *p, const int N, const double *s, const double *c, const double *th, double thm,
+                  const double *w, double wm, double u, int held, double Tm, double *acc, double *am, double *T,
+                  double *cur)
+{
+    double slope;
+    const int m = p->im;
+    if (m < 0) {
+        *T = held ? Tm : motor(p, u, w[0], cur, &slope);
+        return rod_accel_n(p, N, s, c, w, *T, acc, &p->fM);
+    }
+    *T = held ? Tm : motor(p, u, wm, cur, &slope);
+    double k, cg;
+    const double Tg = gear(p, thm - th[0], wm - w[0], &k, &cg);
+    *am = (*T - Tg - p->cfg.b * wm - coulomb(p, wm, NULL)) / p->cfg.J;
+    return rod_accel_n(p, N, s, c, w, Tg, acc, &p->fM);
+}
+
 HOT int rk4_step_n(rod_plant *p, const int N, double u, double h, double *Tsum, double *Isum)
 {
     double *th = p->q, *w = p->v, *s = p->s, *c = p->c, *s2 = p->s2, *c2 = p->c2;
     double *a1 = p->k1v, *a2 = p->k2v, *a3 = p->F, *a4 = p->F2, *w2 = p->w2, *dth = p->th2, *wsum = p->k1q;
-    double T, cur, T2, cur2;
+    double *th2 = p->k2q; /* stage angles (theta_1 for the gear) */
+    const int m = p->im;
+    double T, cur, T2, cur2, slope;
+    const double thm0 = m >= 0 ? th[m] : 0.0, wm0 = m >= 0 ? w[m] : 0.0;
+    const int held = has_lag(p); /* the torque is the step's mean current's, not the stage rates' */
+    const double Tm = held ? motor_step(p, u, m >= 0 ? wm0 : w[0], h, &cur, &slope) : 0.0;
+    double m1 = 0, m2 = 0, m3 = 0, m4 = 0, wm2, wmsum, thm;
     trig(th, s, c, N);
-    int err = rod_accel_n(p, N, s, c, w, u, a1, &p->fM, &T, &cur);
+    int err = rk4_stage(p, N, s, c, th, thm0, w, wm0, u, held, Tm, a1, &m1, &T, &cur);
     if (err) return err;
     for (int i = 0; i < N; i++) { /* stage 2 at y + h/2 k1 */
         dth[i] = 0.5 * h * w[i];
+        th2[i] = th[i] + dth[i];
         w2[i] = w[i] + 0.5 * h * a1[i];
         wsum[i] = w[i] + 2.0 * w2[i];
     }
+    thm = thm0 + 0.5 * h * wm0;
+    wm2 = wm0 + 0.5 * h * m1;
+    wmsum = wm0 + 2.0 * wm2;
     trig_shift(s, c, th, dth, s2, c2, N);
-    err = rod_accel_n(p, N, s2, c2, w2, u, a2, &p->fM, &T2, &cur2);
+    err = rk4_stage(p, N, s2, c2, th2, thm, w2, wm2, u, held, Tm, a2, &m2, &T2, &cur2);
     if (err) return err;
     for (int i = 0; i < N; i++) { /* stage 3 at y + h/2 k2 */
         dth[i] = 0.5 * h * w2[i];
+        th2[i] = th[i] + dth[i];
         w2[i] = w[i] + 0.5 * h * a2[i];
         wsum[i] += 2.0 * w2[i];
     }
+    thm = thm0 + 0.5 * h * wm2;
+    wm2 = wm0 + 0.5 * h * m2;
+    wmsum += 2.0 * wm2;
     trig_shift(s, c, th, dth, s2, c2, N);
-    err = rod_accel_n(p, N, s2, c2, w2, u, a3, &p->fM, &T2, &cur2);
+    err = rk4_stage(p, N, s2, c2, th2, thm, w2, wm2, u, held, Tm, a3, &m3, &T2, &cur2);
     if (err) return err;
     for (int i = 0; i < N; i++) { /* stage 4 at y + h k3 */
         dth[i] = h * w2[i];
+        th2[i] = th[i] + dth[i];
         w2[i] = w[i] + h * a3[i];
         wsum[i] += w2[i];
     }
+    thm = thm0 + h * wm2;
+    wm2 = wm0 + h * m3;
+    wmsum += wm2;
     trig_shift(s, c, th, dth, s2, c2, N);
-    err = rod_accel_n(p, N, s2, c2, w2, u, a4, &p->fM, &T2, &cur2);
+    err = rk4_stage(p, N, s2, c2, th2, thm, w2, wm2, u, held, Tm, a4, &m4, &T2, &cur2);
     if (err) return err;
     const double h6 = h / 6.0;
     for (int i = 0; i < N; i++) {
         th[i] += h6 * wsum[i];
         w[i] += h6 * (a1[i] + 2.0 * (a2[i] + a3[i]) + a4[i]);
+    }
+    if (m >= 0) {
+        th[m] += h6 * wmsum;
+        w[m] += h6 * (m1 + 2.0 * (m2 + m3) + m4);
     }
     *Tsum += T;
     *Isum += cur;
@@ -599,7 +737,7 @@ static void der_prepare(rod_plant *p, const double *q, double *Fc, double *Cb)
         const double sd = 1.0 / (ir[j] * ir[j + 1]) + ax * bx + ay * by;
         const double isd = 1.0 / sd;
         const double kap = 2.0 * cr * isd;
-        const double f = ksj[j] * kap * 2.0 * isd * isd;
+        const double f = ksj[j] * (kap - p->kbar[j]) * 2.0 * isd * isd;
         const double dsax = ra * ax + bx, dsay = ra * ay + by;
         const double dsbx = rb * bx + ax, dsby = rb * by + ay;
         /* dk/da = 2 (-perp(b) s - c ds/da) / s^2, dk/db = 2 (perp(a) s - c ds/db) / s^2, perp(v) = (-vy, vx) */
@@ -625,7 +763,15 @@ static void der_prepare(rod_plant *p, const double *q, double *Fc, double *Cb)
     /* damping: rows rho_j = d(omega_{j+1} - omega_j)/dqd, C = d sum rho rho' + b e1 e1'.
      * d omega_k / d x_k = perp(e_k) / |e_k|^2 = -d omega_k / d x_{k-1}. */
     memset(Cb, 0, sizeof(double) * (size_t)n * DER_BW);
-    Cb[0] = p->cfg.b;
+    Cb[0] = p->b_shaft;
+    if (p->im >= 0) { /* the gear train's spring (explicit); its damping couples theta_m (der_step) */
+        double k, c;
+        const double Tg = gear(p, q[p->im] - q[0], 0.0, &k, &c);
+        Fc[0] += Tg;
+        Fc[p->im] = -Tg;
+        p->gear_c = c;
+        Cb[0] += c;
+    }
     {
         for (int j = 1; j <= N - 1; j++) { /* 1-based edges j, j+1 meet at node j */
             const double d = p->dj[j - 1];
@@ -731,51 +877,76 @@ static void band_solve(const double *L, double *x, int n)
     }
 }
 
+/* A x = r for A = diag(m) + hh C with the motor side coupled to phi through the gear damping
+ * (compliant): the band part Ab is already factored with the Schur term on its first pivot; x_m
+ * comes back from x_0. am: the motor side's diagonal, sc: the coupling (hh c). */
+static void der_solve(const rod_plant *p, const double *Ab, double *x, double am, double sc)
+{
+    const int m = p->im;
+    if (m >= 0) x[0] += sc / am * x[m];
+    band_solve(Ab, x, p->nr);
+    if (m >= 0) x[m] = (x[m] + sc * x[0]) / am;
+}
+
 static int der_step(rod_plant *p, double u, double h, double *Tsum, double *Isum)
 {
-    const int n = p->n;
+    const int n = p->n, nr = p->nr, m = p->im, e = m >= 0 ? m : 0; /* e: where the motor acts */
     const rod_plant_config *k = &p->cfg;
     double *q = p->q, *v = p->v, *md = p->md, *Fc = p->Fc, *Cb = p->Cb, *Ab = p->Ab, *x = p->x, *vh = p->vh;
     const double hh = 0.5 * h;
     if (!p->prepared) der_prepare(p, q, Fc, Cb);
     p->prepared = 0;
-    for (int i = 0; i < n * DER_BW; i++) Ab[i] = hh * Cb[i];
-    for (int i = 0; i < n; i++) Ab[(size_t)i * DER_BW] += md[i];
-    int err = band_ldl(Ab, n);
+    for (int i = 0; i < nr * DER_BW; i++) Ab[i] = hh * Cb[i];
+    for (int i = 0; i < nr; i++) Ab[(size_t)i * DER_BW] += md[i];
+    double am = 1.0, sc = 0.0;
+    if (m >= 0) {
+        am = md[m] + hh * (p->gear_c + k->b);
+        sc = hh * p->gear_c;
+        Ab[0] -= sc * sc / am;
+    }
+    int err = band_ldl(Ab, nr);
     if (err) return err;
     for (int i = 0; i < n; i++) x[i] = md[i] * v[i] + hh * Fc[i];
-    x[0] += hh * (p->ext - coulomb(p, v[0], NULL)); /* explicit: slow next to the step (see coulomb) */
-    double T, cur;
-    if (k->input_mode == ROD_INPUT_TORQUE) {
-        T = u;
-        cur = u / k->kt_out;
-        x[0] += hh * T;
-        band_solve(Ab, x, n);
+    x[0] += hh * p->ext;
+    x[e] -= hh * coulomb(p, v[e], NULL); /* explicit: slow next to the step (see coulomb) */
+    double T, cur, slope;
+    if (k->input_mode == ROD_INPUT_TORQUE || has_lag(p)) {
+        T = motor_step(p, u, v[e], h, &cur, &slope);
+        x[e] += hh * T;
+        der_solve(p, Ab, x, am, sc);
         for (int i = 0; i < n; i++) vh[i] = x[i];
     } else {
-        /* v_half = x + hh T w with x = A^-1 rhs, w = A^-1 e1 and T = kt sat((V - ke v_half_0) / R):
-         * v_half_0 rises with T (w_0 > 0), so the clamped solution of the scalar equation is the
+        /* v_half = x + hh T w with x = A^-1 rhs, w = A^-1 e and T = kt sat((V - ke v_half_e) / R):
+         * v_half_e rises with T (w_e > 0), so the clamped solution of the scalar equation is the
          * clamp of the unclamped one. */
         double *w = p->w;
-        band_solve(Ab, x, n);
+        der_solve(p, Ab, x, am, sc);
         for (int i = 0; i < n; i++) w[i] = 0.0;
-        w[0] = 1.0;
-        band_solve(Ab, w, n);
+        w[e] = 1.0;
+        der_solve(p, Ab, w, am, sc);
         double duty = u;
         if (duty > 1.0) duty = 1.0;
         if (duty < -1.0) duty = -1.0;
-        cur = (duty * k->supply_voltage - k->ke_out * x[0]) / (k->resistance + k->kt_out * k->ke_out * hh * w[0]);
+        cur = (duty * k->supply_voltage - k->ke_out * x[e]) / (k->resistance + k->kt_out * k->ke_out * hh * w[e]);
         if (cur > k->current_limit) cur = k->current_limit;
         if (cur < -k->current_limit) cur = -k->current_limit;
+        p->cur = cur;
         T = k->kt_out * cur;
         for (int i = 0; i < n; i++) vh[i] = x[i] + hh * T * w[i];
     }
     for (int i = 0; i < n; i++) q[i] += h * vh[i];
     der_prepare(p, q, Fc, Cb);
     p->prepared = 1;
-    band_mul(Cb, vh, x, n);
-    for (int i = 0; i < n; i++) v[i] = vh[i] + hh * (Fc[i] - x[i]) / md[i];
-    v[0] += hh * (T + p->ext - coulomb(p, vh[0], NULL)) / md[0];
+    band_mul(Cb, vh, x, nr);
+    for (int i = 0; i < nr; i++) v[i] = vh[i] + hh * (Fc[i] - x[i]) / md[i];
+    v[0] += hh * p->ext / md[0];
+    if (m >= 0) {
+        const double gc = p->gear_c;
+        v[0] += hh * gc * vh[m] / md[0]; /* the coupling half of the gear damping on the shaft row */
+        v[m] = vh[m] + hh * (Fc[m] - (gc + k->b) * vh[m] + gc * vh[0] + T - coulomb(p, vh[m], NULL)) / md[m];
+    } else {
+        v[0] += hh * (T - coulomb(p, vh[0], NULL)) / md[0];
+    }
     *Tsum += T;
     *Isum += cur;
     return ROD_OK;
@@ -802,6 +973,12 @@ static int config_ok(const rod_plant_config *k)
     if (k->kind == ROD_PLANT_DER ? k->method != ROD_METHOD_VERLET
                                  : (k->method != ROD_METHOD_ROS2 && k->method != ROD_METHOD_RK4))
         return 0;
+    if (!(k->gear_stiffness >= 0 && k->gear_damping >= 0 && k->backlash >= 0 && k->output_inertia >= 0 &&
+          k->output_viscous >= 0 && k->inductance >= 0 && isfinite(k->gear_stiffness) && isfinite(k->backlash) &&
+          isfinite(k->zero_error) && isfinite(k->rest_curvature)))
+        return 0;
+    if (k->gear_stiffness > 0 && !(k->J > 0)) return 0; /* the motor side needs its inertia */
+    if (k->gear_stiffness > 0 && !(k->hub_length > 0 || k->output_inertia > 0)) return 0;
     return 1;
 }
 
@@ -809,14 +986,16 @@ rod_plant *rod_plant_new(const rod_plant_config *cfg)
 {
     if (!config_ok(cfg)) return NULL;
     const int N = cfg->edges;
-    const int n = cfg->kind == ROD_PLANT_DER ? 2 * N - 1 : N;
+    const int compliant = cfg->gear_stiffness > 0.0;
+    const int nr = cfg->kind == ROD_PLANT_DER ? 2 * N - 1 : N;
+    const int n = nr + compliant;
     /* one block: struct, then doubles */
     size_t nd = 0;
     nd += 2 * (size_t)n;                  /* q, v */
     nd += (size_t)N + 1;                  /* cc */
     nd += (size_t)n;                      /* md */
-    nd += 21 * (size_t)N;                 /* inextensible vectors, s .. mn */
-    nd += 3 * (size_t)N;                  /* lv, ksj, dj */
+    nd += 21 * ((size_t)N + 1);           /* inextensible vectors, s .. mn (the motor side's row too) */
+    nd += 4 * (size_t)N;                  /* lv, ksj, dj, kbar */
     nd += 2 * (6 * (size_t)N + 2);        /* two ABA factors */
     nd += 2 * (size_t)n * DER_BW;         /* Cb, Ab */
     nd += 4 * (size_t)n;                  /* Fc, x, w, vh */
@@ -835,34 +1014,40 @@ rod_plant *rod_plant_new(const rod_plant_config *cfg)
     p->cfg = *cfg;
     p->N = N;
     p->n = n;
+    p->nr = nr;
+    p->im = compliant ? n - 1 : -1;
+    /* rigid: the motor's inertia and friction act on theta_1 with the gearbox's output side */
+    p->J_shaft = compliant ? cfg->output_inertia : cfg->J + cfg->output_inertia;
+    p->b_shaft = compliant ? cfg->output_viscous : cfg->b + cfg->output_viscous;
     TAKE(p->q, n);
     TAKE(p->v, n);
     TAKE(p->cc, N + 1);
     TAKE(p->md, n);
-    TAKE(p->s, N);
-    TAKE(p->c, N);
-    TAKE(p->s2, N);
-    TAKE(p->c2, N);
-    TAKE(p->F, N);
-    TAKE(p->F2, N);
-    TAKE(p->kj, N);
-    TAKE(p->ta, N);
-    TAKE(p->tb, N);
-    TAKE(p->tc, N);
-    TAKE(p->td, N);
-    TAKE(p->k1q, N);
-    TAKE(p->k1v, N);
-    TAKE(p->k2q, N);
-    TAKE(p->k2v, N);
-    TAKE(p->th2, N);
-    TAKE(p->w2, N);
-    TAKE(p->r2, N);
-    TAKE(p->ta2, N);
-    TAKE(p->arm, N);
-    TAKE(p->mn, N);
+    TAKE(p->s, N + 1);
+    TAKE(p->c, N + 1);
+    TAKE(p->s2, N + 1);
+    TAKE(p->c2, N + 1);
+    TAKE(p->F, N + 1);
+    TAKE(p->F2, N + 1);
+    TAKE(p->kj, N + 1);
+    TAKE(p->ta, N + 1);
+    TAKE(p->tb, N + 1);
+    TAKE(p->tc, N + 1);
+    TAKE(p->td, N + 1);
+    TAKE(p->k1q, N + 1);
+    TAKE(p->k1v, N + 1);
+    TAKE(p->k2q, N + 1);
+    TAKE(p->k2v, N + 1);
+    TAKE(p->th2, N + 1);
+    TAKE(p->w2, N + 1);
+    TAKE(p->r2, N + 1);
+    TAKE(p->ta2, N + 1);
+    TAKE(p->arm, N + 1);
+    TAKE(p->mn, N + 1);
     TAKE(p->lv, N);
     TAKE(p->ksj, N);
     TAKE(p->dj, N);
+    TAKE(p->kbar, N);
     TAKE(p->fS.U, 3 * (size_t)N);
     TAKE(p->fS.invD, N);
     TAKE(p->fS.P, 2 * (size_t)N + 2);
@@ -887,6 +1072,9 @@ rod_plant *rod_plant_new(const rod_plant_config *cfg)
         p->lv[i] = i == 0 ? cfg->hub_length : cfg->l;
         p->ksj[i] = i == 0 ? cfg->hub_stiffness : cfg->EI / cfg->l;
         p->dj[i] = i == 0 ? cfg->hub_damping : cfg->d;
+        /* a rod curved at rest: the joint rests at the turning angle kappa x its Voronoi length,
+         * which its stiffness EI / l_v carries */
+        p->kbar[i] = i < N - 1 ? 2.0 * tan(0.5 * cfg->rest_curvature * cfg->EI / p->ksj[i]) : 0.0;
     }
     if (cfg->kind == ROD_PLANT_INEXTENSIBLE) {
         for (int i = 0; i < N; i++) p->mn[i] = cfg->m; /* node i + 1 */
@@ -902,7 +1090,7 @@ rod_plant *rod_plant_new(const rod_plant_config *cfg)
         p->cc[0] = 0.5 * cfg->hub_mass;
         p->cc[1] = 0.5 * (cfg->hub_mass + cfg->m);
         p->cc[N] = 0.5 * cfg->m;
-        p->md[0] = cfg->J + p->cc[1] * cfg->hub_length * cfg->hub_length;
+        p->md[0] = p->J_shaft + p->cc[1] * cfg->hub_length * cfg->hub_length;
         for (int k = 2; k <= N; k++) p->md[node_index(k)] = p->md[node_index(k) + 1] = p->cc[k];
     }
     for (int i = 0; i < n; i++) p->v[i] = 0.0;
@@ -913,6 +1101,7 @@ rod_plant *rod_plant_new(const rod_plant_config *cfg)
         }
         p->q[0] = 0.0;
     }
+    if (compliant) p->md[p->im] = cfg->J;
     return p;
 }
 
@@ -976,6 +1165,11 @@ int rod_plant_set_state(rod_plant *p, const double *theta, const double *dtheta)
 {
     const int N = p->N;
     p->prepared = 0;
+    p->cur = 0.0;
+    if (p->im >= 0) {
+        p->q[p->im] = theta[0];
+        p->v[p->im] = dtheta[0];
+    }
     if (p->cfg.kind == ROD_PLANT_INEXTENSIBLE) {
         memcpy(p->q, theta, sizeof(double) * (size_t)N);
         memcpy(p->v, dtheta, sizeof(double) * (size_t)N);
@@ -1035,6 +1229,32 @@ void rod_plant_get_state(const rod_plant *p, double *theta, double *dtheta)
     state_angles(p, p->q, p->v, theta, dtheta);
 }
 
+void rod_plant_motor_state(const rod_plant *p, double *theta_m, double *omega_m, double *current)
+{
+    const int e = p->im >= 0 ? p->im : 0;
+    if (theta_m) *theta_m = p->q[e];
+    if (omega_m) *omega_m = p->v[e];
+    if (current) *current = p->cur;
+}
+
+int rod_plant_set_motor_state(rod_plant *p, double theta_m, double omega_m, double current)
+{
+    if (!(isfinite(theta_m) && isfinite(omega_m) && isfinite(current))) return ROD_ERR_ARGUMENT;
+    const int e = p->im >= 0 ? p->im : 0;
+    p->q[e] = theta_m;
+    p->v[e] = omega_m;
+    p->cur = current;
+    p->prepared = 0;
+    return ROD_OK;
+}
+
+double rod_plant_gear_torque(const rod_plant *p)
+{
+    if (p->im < 0) return 0.0;
+    double k, c;
+    return gear(p, p->q[p->im] - p->q[0], p->v[p->im] - p->v[0], &k, &c);
+}
+
 void rod_plant_nodes(const rod_plant *p, double *xy)
 {
     const int N = p->N;
@@ -1055,23 +1275,38 @@ void rod_plant_nodes(const rod_plant *p, double *xy)
 /* ------------------------------------------------------------------------------------------ */
 /* model evaluation (tests, linearization, energy)                                              */
 
+/* The motor torque at rate omega for an evaluation (not a step): with inductance, the current state's. */
+static double motor_now(const rod_plant *p, double input, double omega)
+{
+    double cur, slope;
+    if (has_lag(p)) return p->cfg.kt_out * p->cur;
+    return motor(p, input, omega, &cur, &slope);
+}
+
 int rod_plant_force(rod_plant *p, const double *y, double input, double *F)
 {
-    const int n = p->n;
+    const int n = p->n, nr = p->nr, m = p->im;
     const double *q = y, *qd = y + n;
-    double cur, slope;
-    const double T = motor(p, input, qd[0], &cur, &slope);
+    const double T = motor_now(p, input, qd[m >= 0 ? m : 0]);
+    double Tshaft = T, Tg = 0.0;
+    if (m >= 0) {
+        double k, c;
+        Tg = gear(p, q[m] - q[0], qd[m] - qd[0], &k, &c);
+        Tshaft = Tg;
+        F[m] = T - Tg - p->cfg.b * qd[m] - coulomb(p, qd[m], NULL);
+    }
     if (p->cfg.kind == ROD_PLANT_INEXTENSIBLE) {
         double *s = p->s2, *c = p->c2;
         trig(q, s, c, p->N);
-        rod_force(p, p->N, s, c, qd, T, F, NULL);
+        rod_force(p, p->N, s, c, qd, Tshaft, F, NULL);
         return ROD_OK;
     }
     p->prepared = 0;
     der_prepare(p, q, p->Fc, p->Cb);
-    band_mul(p->Cb, qd, p->tmp, n);
-    for (int i = 0; i < n; i++) F[i] = p->Fc[i] - p->tmp[i];
-    F[0] += T + p->ext - coulomb(p, qd[0], NULL);
+    band_mul(p->Cb, qd, p->tmp, nr);
+    for (int i = 0; i < nr; i++) F[i] = p->Fc[i] - p->tmp[i];
+    if (m >= 0) F[0] += p->gear_c * qd[m]; /* Fc and Cb[0] hold the gear's spring and damping diagonal */
+    F[0] += p->ext + (m >= 0 ? 0.0 : T - coulomb(p, qd[0], NULL));
     return ROD_OK;
 }
 
@@ -1083,16 +1318,24 @@ int rod_plant_mass(rod_plant *p, const double *y, double *M)
         for (int i = 0; i < n; i++) M[(size_t)i * n + i] = p->md[i];
         return ROD_OK;
     }
-    trig(y, p->s2, p->c2, n);
-    rod_mass_upper(p, p->s2, p->c2, M);
-    for (int i = 0; i < n; i++)
-        for (int j = 0; j < i; j++) M[(size_t)i * n + j] = M[(size_t)j * n + i];
+    const int N = p->N;
+    trig(y, p->s2, p->c2, N);
+    for (int i = 0; i < N; i++) {
+        const double si = p->s2[i] * p->lv[i], ci = p->c2[i] * p->lv[i];
+        for (int j = i; j < N; j++) {
+            const double v = p->cc[j] * p->lv[j] * (ci * p->c2[j] + si * p->s2[j]);
+            M[(size_t)i * n + j] = v;
+            M[(size_t)j * n + i] = v;
+        }
+    }
+    M[0] += p->J_shaft;
+    if (p->im >= 0) M[(size_t)p->im * n + p->im] = p->cfg.J;
     return ROD_OK;
 }
 
 int rod_plant_deriv(rod_plant *p, const double *y, double input, double *dy)
 {
-    const int n = p->n;
+    const int n = p->n, N = p->N;
     int err = rod_plant_force(p, y, input, dy + n);
     if (err) return err;
     memcpy(dy, y + n, sizeof(double) * (size_t)n);
@@ -1100,13 +1343,22 @@ int rod_plant_deriv(rod_plant *p, const double *y, double input, double *dy)
         for (int i = 0; i < n; i++) dy[n + i] /= p->md[i];
         return ROD_OK;
     }
-    node_positions(p, n, p->s2, p->c2, p->fM.P);
-    for (int k = 0; k < n; k++) p->arm[k] = 0.0;
-    p->arm[0] = p->cfg.J;
-    err = aba_factor_pass(p, n, &p->fM, p->arm, dy + n, p->ta2);
+    if (p->im >= 0) dy[n + p->im] /= p->cfg.J;
+    node_positions(p, N, p->s2, p->c2, p->fM.P);
+    for (int k = 0; k < N; k++) p->arm[k] = 0.0;
+    p->arm[0] = p->J_shaft;
+    err = aba_factor_pass(p, N, &p->fM, p->arm, dy + n, p->ta2);
     if (err) return err;
-    aba_forward(n, &p->fM, dy + n, p->ta2);
+    aba_forward(N, &p->fM, dy + n, p->ta2);
     return ROD_OK;
+}
+
+/* The motor side's kinetic energy and the gear train's spring (inextensible rod; 0 when rigid). */
+static double drivetrain_energy(const rod_plant *p)
+{
+    if (p->im < 0) return 0.0;
+    const double w = p->v[p->im];
+    return 0.5 * p->cfg.J * w * w + gear_energy(p, p->q[p->im] - p->q[0]);
 }
 
 double rod_plant_energy(const rod_plant *cp)
@@ -1126,9 +1378,9 @@ double rod_plant_energy(const rod_plant *cp)
         for (int j = 0; j < N - 1; j++) {
             const double cp2 = c[j + 1] * c[j] + s[j + 1] * s[j], sp = s[j + 1] * c[j] - c[j + 1] * s[j];
             const double t = sp / (1.0 + cp2);
-            bend += ksj[j] * 4.0 * t * t;
+            bend += ksj[j] * (2.0 * t - p->kbar[j]) * (2.0 * t - p->kbar[j]);
         }
-        return 0.5 * kin + 0.5 * bend + p->cfg.g * grav;
+        return 0.5 * kin + 0.5 * bend + p->cfg.g * grav + drivetrain_energy(p);
     }
     const int n = p->n;
     double *X = p->X, *E = p->E;
@@ -1144,10 +1396,12 @@ double rod_plant_energy(const rod_plant *cp)
         const double ax = E[2 * j], ay = E[2 * j + 1], bx = E[2 * j + 2], by = E[2 * j + 3];
         const double kap = 2.0 * (ax * by - ay * bx) /
                            (sqrt(ax * ax + ay * ay) * sqrt(bx * bx + by * by) + ax * bx + ay * by);
-        bend += ksj[j] * kap * kap;
+        bend += ksj[j] * (kap - p->kbar[j]) * (kap - p->kbar[j]);
     }
     for (int k = 0; k <= N; k++) grav += p->cc[k] * X[2 * k + 1];
-    return 0.5 * kin + 0.5 * p->cfg.EA * p->cfg.l * st + 0.5 * bend + p->cfg.g * grav;
+    /* the DER's kinetic sum already covers the motor side (md holds its inertia) */
+    const double gear_pe = p->im >= 0 ? gear_energy(p, p->q[p->im] - p->q[0]) : 0.0;
+    return 0.5 * kin + 0.5 * p->cfg.EA * p->cfg.l * st + 0.5 * bend + p->cfg.g * grav + gear_pe;
 }
 
 /* ------------------------------------------------------------------------------------------ */
@@ -1180,14 +1434,17 @@ int rod_plant_advance(rod_plant *p, double input, double dt)
 
 int32_t rod_plant_encoder_count(const rod_plant *p, double theta1)
 {
-    const double x = floor(theta1 * (p->cfg.counts_per_rev / ROD_TWO_PI) + p->cfg.encoder_phase);
+    const double x = floor((theta1 + p->cfg.zero_error) * (p->cfg.counts_per_rev / ROD_TWO_PI) + p->cfg.encoder_phase);
     if (!isfinite(x)) return INT32_MIN;
     if (x >= 2147483647.0) return INT32_MAX;
     if (x <= -2147483648.0) return INT32_MIN;
     return (int32_t)x;
 }
 
-int32_t rod_plant_encoder(const rod_plant *p) { return rod_plant_encoder_count(p, p->q[0]); }
+int32_t rod_plant_encoder(const rod_plant *p)
+{
+    return rod_plant_encoder_count(p, p->q[p->im >= 0 && !p->cfg.encoder_on_shaft ? p->im : 0]);
+}
 
 /* ------------------------------------------------------------------------------------------ */
 /* closed loop                                                                                  */
@@ -1204,16 +1461,21 @@ int64_t rod_run_closed_loop(rod_plant *p, const rod_sil_api *api, const rod_run_
     if (opt->est_len < 0 || opt->est_len > ROD_RUN_MAX_EST) return ROD_ERR_ARGUMENT;
     if (opt->delay_periods != 0 && opt->delay_periods != 1) return ROD_ERR_ARGUMENT;
     const int N = p->N, ne = opt->est_len, duty_mode = p->cfg.input_mode == ROD_INPUT_DUTY;
-    const double period = opt->period, t0 = p->t;
+    if (!(opt->jitter >= 0 && opt->jitter < opt->period)) return ROD_ERR_ARGUMENT;
+    const double period = opt->period;
     float est[ROD_RUN_MAX_EST];
     if (opt->reset) {
         api->reset();
         p->pending = 0.0;
+        p->jit = 0.0;
+        p->rng = opt->jitter_seed ? opt->jitter_seed : 0x9E3779B9u;
         if (opt->arm_mode != 0) api->arm(opt->arm_mode);
     }
+    const double t0 = p->t - p->jit; /* the grid: the plant may sit a jitter past it */
     for (int64_t k = 0; k < opt->periods; k++) {
         const int32_t count = rod_plant_encoder(p);
         if (log->time) log->time[k] = t0 + (double)k * period;
+        if (log->motor) log->motor[k] = p->q[p->im >= 0 ? p->im : 0];
         state_angles(p, p->q, p->v, log->theta ? log->theta + k * N : NULL, log->dtheta ? log->dtheta + k * N : NULL);
         const float cmd = api->step(count);
         const float duty = api->duty ? api->duty() : 0.0f;
@@ -1229,8 +1491,20 @@ int64_t rod_run_closed_loop(rod_plant *p, const rod_sil_api *api, const rod_run_
             applied = p->pending;
             p->pending = input;
         }
-        const int err = rod_plant_advance(p, applied, period);
-        p->t = t0 + (double)(k + 1) * period;
+        /* the next read comes a fresh jitter after the next period's start (xorshift32: the same
+         * sequence for the same seed on every machine) */
+        double next = 0.0;
+        if (opt->jitter > 0) {
+            uint32_t r = p->rng;
+            r ^= r << 13;
+            r ^= r >> 17;
+            r ^= r << 5;
+            p->rng = r;
+            next = opt->jitter * ((double)r / 4294967296.0);
+        }
+        const int err = rod_plant_advance(p, applied, period + next - p->jit);
+        p->jit = next;
+        p->t = t0 + (double)(k + 1) * period + next;
         if (log->est) memcpy(log->est + k * ne, est, sizeof(float) * (size_t)ne);
         if (log->torque_cmd) log->torque_cmd[k] = cmd;
         if (log->duty) log->duty[k] = duty;

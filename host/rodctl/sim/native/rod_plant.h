@@ -15,11 +15,24 @@
  *                       i = (V - ke_out * omega) / resistance, clamped to +-current_limit
  *                           (the driver's current regulation),
  *                       torque = kt_out * i,   omega = dtheta_1.
- *                     The electrical time constant L/R is neglected (no winding inductance in
- *                     Params): the current follows the voltage and the speed instantly.
+ *                     With inductance = 0 the current follows the voltage and the speed at once;
+ *                     with inductance > 0 it is a state: L di/dt = V - R i - ke_out omega_m,
+ *                     integrated exactly over each step with omega_m held, then clamped.
  *
- * Encoder: count = floor(theta_1 * counts_per_rev / (2 pi) + phase), int32 (saturating;
- * INT32_MIN for a non-finite angle).
+ * Gearbox (gear_stiffness > 0: compliant; 0: rigid, the motor turns theta_1 itself):
+ *   the motor side is its own coordinate theta_m (output-referred), the LAST generalized
+ *   coordinate, with the reflected rotor inertia J, the viscous friction b, the Coulomb friction,
+ *   the motor torque and the back-EMF. The shaft hub (theta_1) carries output_inertia and
+ *   output_viscous. Between them the gear train: torque k x + c (omega_m - omega_1) while the
+ *   teeth touch, 0 inside the gap, x = the motor-minus-shaft angle beyond half the backlash on
+ *   either side. The encoder reads theta_m. In the limit backlash -> 0, k -> inf it is the rigid
+ *   plant (tests/test_plant_gearbox.py).
+ *
+ * Encoder: count = floor((theta_enc + zero_error) * counts_per_rev / (2 pi) + phase), int32
+ * (saturating; INT32_MIN for a non-finite angle); theta_enc = theta_m (compliant) or theta_1.
+ *
+ * Rest curvature: every flexible joint's bending spring rests at the turning angle
+ * rest_curvature x its Voronoi length (EI / its stiffness): a rod that is not straight at rest.
  *
  * Integrators (see rod_plant.c for the derivation; the method and step are chosen by the Python
  * wrapper from the model's linearization, rodctl.sim.plant.choose_integrator):
@@ -42,7 +55,7 @@
 extern "C" {
 #endif
 
-#define ROD_PLANT_API_VERSION 2
+#define ROD_PLANT_API_VERSION 3
 
 enum { ROD_PLANT_INEXTENSIBLE = 0, ROD_PLANT_DER = 1 };
 enum { ROD_INPUT_TORQUE = 0, ROD_INPUT_DUTY = 1 };
@@ -89,6 +102,18 @@ typedef struct {
     double hub_damping;      /* damping of that joint [N m s/rad] */
     double coulomb;          /* Coulomb (dry) friction at the output shaft [N m]: -coulomb tanh(omega / coulomb_rate) */
     double coulomb_rate;     /* smoothing rate of the Coulomb friction [rad/s] (> 0) */
+    /* gearbox and rig imperfections (all 0: the rigid plant of API version 2) */
+    double gear_stiffness;   /* torsional stiffness of the gear train at the output [N m/rad]; 0: rigid */
+    double gear_damping;     /* its damping while the teeth touch [N m s/rad] */
+    double backlash;         /* total gap at the output [rad] (compliant only) */
+    double output_inertia;   /* rod-side inertia of the gearbox: output shaft, last gear, hub [kg m^2] */
+    double output_viscous;   /* rod-side viscous friction [N m s/rad] (b and coulomb act on the motor side
+                                when compliant, on theta_1 when rigid) */
+    double inductance;       /* winding inductance [H] (duty mode); 0: no current lag */
+    double zero_error;       /* the encoder reads the angle plus this [rad] */
+    double rest_curvature;   /* curvature of the rod at rest [1/m] (0: straight) */
+    int32_t encoder_on_shaft; /* 1: the encoder reads theta_1 (an output-shaft encoder), 0: the motor side */
+    int32_t reserved;
 } rod_plant_config;
 
 typedef struct rod_plant rod_plant;
@@ -101,7 +126,8 @@ void rod_plant_free(rod_plant *p);
 
 int rod_plant_kind(const rod_plant *p);
 int rod_plant_edges(const rod_plant *p);
-/* Size n of the generalized coordinates: N (inextensible) or 2N - 1 (DER). */
+/* Size n of the generalized coordinates: N (inextensible) or 2N - 1 (DER), plus 1 (theta_m, the
+ * last) when the gearbox is compliant. */
 int rod_plant_size(const rod_plant *p);
 int rod_plant_set_max_step(rod_plant *p, double h);
 int rod_plant_set_method(rod_plant *p, int method); /* ROD_ERR_ARGUMENT if not valid for the kind */
@@ -111,8 +137,15 @@ int rod_plant_set_encoder_phase(rod_plant *p, double phase);
 double rod_plant_time(const rod_plant *p);
 void rod_plant_set_time(rod_plant *p, double t);
 
-/* Edge angles and rates theta_1..N, dtheta_1..N (for the DER: an unstretched rod, eq. 6 inverted). */
+/* Edge angles and rates theta_1..N, dtheta_1..N (for the DER: an unstretched rod, eq. 6 inverted).
+ * The motor side (compliant) is set to theta_1 and its rate, the middle of the gap; the current to 0. */
 int rod_plant_set_state(rod_plant *p, const double *theta, const double *dtheta);
+/* The motor side: angle theta_m and rate [rad, rad/s] at the output (theta_1 and its rate when rigid),
+ * and the winding current [A] (the last step's when inductance = 0). Any pointer may be NULL. */
+void rod_plant_motor_state(const rod_plant *p, double *theta_m, double *omega_m, double *current);
+int rod_plant_set_motor_state(rod_plant *p, double theta_m, double omega_m, double current);
+/* Gear torque on the shaft [N m] at the current state (0 inside the gap; 0 when rigid). */
+double rod_plant_gear_torque(const rod_plant *p);
 /* Edge angles (unwrapped edge to edge from theta_1) and edge rates omega_k = (e_k x de_k)/|e_k|^2. */
 void rod_plant_get_state(const rod_plant *p, double *theta, double *dtheta);
 /* Generalized coordinates and their rates, n values each. */
@@ -121,7 +154,8 @@ void rod_plant_get_raw_state(const rod_plant *p, double *q, double *qd);
 /* Node positions x_0..x_N as (x, y) pairs, 2(N + 1) values [m]. */
 void rod_plant_nodes(const rod_plant *p, double *xy);
 
-/* Kinetic + elastic + gravitational energy [J] (gravity zero at the axis height). */
+/* Kinetic + elastic + gravitational energy [J] (gravity zero at the axis height), the gear train's
+ * spring and the motor side's kinetic energy included. */
 double rod_plant_energy(const rod_plant *p);
 
 /* Motor torque at the output shaft [N m] for `input` at shaft rate omega; *current gets the
@@ -133,7 +167,8 @@ double rod_plant_motor_torque(const rod_plant *p, double input, double omega, do
 int rod_plant_deriv(rod_plant *p, const double *y, double input, double *dy);
 
 /* Generalized force at raw state y: inextensible: T e1 - C - V - D (so M(theta) qdd = F);
- * DER: the node-coordinate force (diag(m) qdd = F). n values. */
+ * DER: the node-coordinate force (diag(m) qdd = F). n values (the motor side's last, compliant).
+ * With inductance the motor torque is the one of the current state. */
 int rod_plant_force(rod_plant *p, const double *y, double input, double *F);
 
 /* Mass matrix at raw state y, n x n row-major (DER: diagonal). */
@@ -185,7 +220,8 @@ typedef struct {
     int32_t arm_mode;      /* after reset: rod_sil_arm(arm_mode) once if arm_mode != 0 */
     int32_t delay_periods; /* 0: the command acts in the period it was computed; 1: one period later */
     int32_t stop_on_mode;  /* stop after the first period whose mode equals this; -1: never */
-    int32_t reserved;
+    uint32_t jitter_seed;  /* seed of the jitter draws */
+    double jitter;         /* control-interrupt jitter [s]: encoder read and new command at t_k + U[0, jitter) */
 } rod_run_options;
 
 /* Caller-owned log arrays, one row per period k (any pointer may be NULL):
@@ -197,7 +233,8 @@ typedef struct {
  *   torque[k]        mean motor torque applied over [t_k, t_k + period] [N m]
  *   current[k]       mean motor current over the period [A]
  *   mode[k]          rod_sil_status's return
- *   count[k]         the encoder count given to step k */
+ *   count[k]         the encoder count given to step k
+ *   motor[k]         the motor side's angle at the encoder read (theta_1 when rigid) [rad] */
 typedef struct {
     double *time;
     double *theta;
@@ -209,6 +246,7 @@ typedef struct {
     double *current;
     int32_t *mode;
     int32_t *count;
+    double *motor;
 } rod_run_log;
 
 typedef struct {
@@ -220,6 +258,8 @@ typedef struct {
 
 /* Per period k: count = encoder(plant) -> cmd = step(count) [-> one-period delay] -> hold the
  * torque (torque mode) or rod_sil_duty() (duty mode) for one period while integrating -> log.
+ * With jitter > 0 the read and the new command happen at t_k + j_k (j_k uniform in [0, jitter),
+ * a fixed sequence from jitter_seed); the log's time stays t_k.
  * Returns the number of periods run, or a negative error. */
 int64_t rod_run_closed_loop(rod_plant *p, const rod_sil_api *api, const rod_run_options *opt,
                             const rod_run_log *log, rod_run_result *result);

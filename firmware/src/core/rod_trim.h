@@ -1,0 +1,51 @@
+/* rod_trim.h -- finding upright from the physics: an upright rod needs no holding torque.
+ *
+ * The encoder's zero is taken at boot to a count (0.37 deg), and the gearbox's play sits between
+ * the encoder and the rod: neither says where the rod stands upright to the tenth of a degree a
+ * rod near its buckling length needs (its tip leans several times what its foot does). The torque
+ * says it: a rod held off upright needs a steady torque to stay there, and the command is known
+ * exactly, with no quantization. So the trim moves the balance set-point (the encoder angle the
+ * estimator calls upright) while the steady torque lasts:
+ *
+ *     hold += ROD_TRIM_HOLD_K (u - hold)                     low-passed torque of the rod's model
+ *     while every estimated angle is within ROD_TRIM_GATE_RAD of upright (quasi-static):
+ *         trim += ROD_TRIM_RATE * dz(hold, ROD_TRIM_BAND_NM),   |trim| <= ROD_TRIM_MAX_RAD
+ *
+ * dz is a dead zone: the trim stops once the steady torque is inside the band, not at zero. With
+ * backlash the zero-torque point lies inside the gap, where nothing holds the rod's foot and the
+ * rod falls to one flank or the other; a small steady torque keeps it resting on one flank
+ * instead of hunting across the gap (docs/control.md, "Finding upright").
+ *
+ * ROD_TRIM_RATE [rad per N m per period] makes the trim loop a first-order lag of the design's
+ * time constant on the design model (gains/rodgains/trim.py).
+ */
+#ifndef ROD_TRIM_H
+#define ROD_TRIM_H
+
+#include <stdbool.h>
+
+#include "rod_config.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct {
+    float trim; /* encoder angle of the rod's upright, relative to the encoder's [rad] */
+    float hold; /* low-passed torque the balance commanded, friction compensation apart [N m] */
+} rod_trim_t;
+
+/* Power-on: no trim. */
+void rod_trim_init(rod_trim_t *t);
+
+/* A new balance (the catch): the steady torque is the new balance's; the trim is the rig's and stays. */
+void rod_trim_catch(rod_trim_t *t);
+
+/* One balance period with the torque the rod's model was given; returns the trim [rad]. */
+float rod_trim_update(rod_trim_t *t, float torque, bool quasi_static);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* ROD_TRIM_H */
