@@ -1,35 +1,58 @@
-"""`rodctl bench --only control`: issue 8's control goals as bench numbers with verdicts (the
-simulations are replaced by fixed rows here; the real numbers are the README's scenario table)."""
+"""`rodctl bench --only control`: the control goals of issues 8 and 31 as bench numbers with verdicts (the
+simulations are replaced by fixed rows here; the real numbers are in docs/control.md)."""
 
 from __future__ import annotations
 
 import json
 
+import numpy as np
+
 from rodctl.cli import main
 from rodctl.sim import matrix as M
 
 
-def test_control_goals_are_reported_with_verdicts_and_a_miss_exits_1(monkeypatch, tmp_path, capsys):
-    def run_case(params, case, task, **kw):
-        return {"settle_s": 0.7 if task == "balance" else 1.55, "caught_at_s": 0.93 if task == "swingup" else None}
+def _fake_run_case(final_deg: float, torque_nm: float):
+    def run_case(params, case, task, keep_log=False, **kw):
+        r = {"settle_s": 0.7 if task == "balance" else 1.55, "caught_at_s": 0.93 if task == "swingup" else None,
+             "final_dev_deg": final_deg}
+        if keep_log:
+            t = np.arange(0.0, 12.0, 1e-3)
+            r["log"] = {"time": t, "torque": np.where(np.arange(t.size) % 2, torque_nm, -torque_nm)}
+        return r
 
-    monkeypatch.setattr(M, "run_case", run_case)
-    monkeypatch.setattr(M, "run_matrix", lambda p, **kw: [{"passed": True}] * 50 + [{"passed": False}] * 2)
+    return run_case
+
+
+def test_control_goals_are_reported_with_verdicts_and_a_miss_exits_1(monkeypatch, tmp_path, capsys):
+    monkeypatch.setattr(M, "run_case", _fake_run_case(final_deg=0.8, torque_nm=0.025))
+    rows = [{"passed": True, "case": "x", "final_dev_deg": 1.0}] * 70 + \
+        [{"passed": False, "case": "backlash3", "final_dev_deg": 4.2}] * 2
+    monkeypatch.setattr(M, "run_matrix", lambda p, **kw: rows)
     monkeypatch.setattr(M, "longest_balanced", lambda p, designs=((),): {"ratio": 1.10})
     out = tmp_path / "bench.json"
-    assert main(["bench", "--only", "control", "--json", str(out)]) == 1  # two goals missed
+    assert main(["bench", "--only", "control", "--json", str(out)]) == 1  # goals missed
     got = json.loads(out.read_text())
-    assert got == {"nominal_balance_settle_s": 0.7, "nominal_swingup_catch_s": 0.93, "nominal_swingup_settle_s": 1.55,
-                   "matrix_runs_passing": 50, "longest_rod_ratio": 1.1}
+    assert got == {"nominal_balance_settle_s": 0.7, "nominal_balance_final_deg": 0.8, "nominal_swingup_catch_s": 0.93,
+                   "nominal_swingup_settle_s": 1.55, "nominal_swingup_final_deg": 0.8, "balanced_torque_rms_mNm": 25.0,
+                   "matrix_runs_passing": 70, "matrix_runs": 72, "backlash3_final_deg": 4.2, "longest_rod_ratio": 1.1}
     lines = {line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line.strip()}
-    assert " ok " in lines["nominal_balance_settle_s"] and "MISSED" in lines["longest_rod_ratio"]
-    assert "MISSED" in lines["matrix_runs_passing"] and "(goal >= 1.3 x L_crit)" in lines["longest_rod_ratio"]
+    assert " ok " in lines["nominal_balance_settle_s"] and " ok " in lines["nominal_balance_final_deg"]
+    assert "MISSED" in lines["balanced_torque_rms_mNm"] and "(goal <= 20 mN m)" in lines["balanced_torque_rms_mNm"]
+    assert "MISSED" in lines["backlash3_final_deg"] and "MISSED" in lines["longest_rod_ratio"]
+    assert "MISSED" not in lines["matrix_runs_passing"]  # a count, no goal: the play makes it a share
 
 
 def test_control_quick_skips_the_matrix_and_the_longest_rod(monkeypatch):
     from rodctl.bench import control
 
-    monkeypatch.setattr(M, "run_case", lambda params, case, task, **kw: {"settle_s": None, "caught_at_s": None})
+    def never(params, case, task, keep_log=False, **kw):
+        r = {"settle_s": None, "caught_at_s": None, "final_dev_deg": 5.0}
+        if keep_log:
+            r["log"] = {"time": np.arange(0.0, 12.0, 1e-3), "torque": np.zeros(12000)}
+        return r
+
+    monkeypatch.setattr(M, "run_case", never)
     got = control.measure(quick=True)
-    assert set(got) == {"nominal_balance_settle_s", "nominal_swingup_catch_s", "nominal_swingup_settle_s"}
+    assert set(got) == {"nominal_balance_settle_s", "nominal_balance_final_deg", "nominal_swingup_catch_s",
+                        "nominal_swingup_settle_s", "nominal_swingup_final_deg", "balanced_torque_rms_mNm"}
     assert got["nominal_balance_settle_s"] == float("inf")  # never settled reads as a miss, not a crash

@@ -152,7 +152,7 @@ def test_the_written_file_carries_the_stiffer_shaft_and_says_why(monkeypatch, tm
     at = [i for i, ln in enumerate(text.splitlines()) if ln.startswith("q_shaft_angle = 400.0 ")]
     assert len(at) == 1 and text.splitlines()[at[0] + 1] == (
         "# ^ rodctl identify: 400 instead of the nominal file's 325: at 325 the best friction compensation passed "
-        "50/52 (nominal goals met with 1.00 s to spare), at 400 52/52 (nominal goals met with 1.00 s to spare); "
+        "76/78 (nominal goals met with 1.00 s to spare), at 400 78/78 (nominal goals met with 1.00 s to spare); "
         "the candidates are under lqr.friction_compensation")
     assert load_params(out)["lqr"]["friction_compensation"] == pytest.approx(1.5 * 0.005)
 
@@ -173,9 +173,9 @@ def test_on_rig_s4_1_only_the_stiffer_shaft_holds_the_damped_rod():
     """What the second stage is for, on the real plant: the design from rig s4_1's values with 1.4 x its
     dry friction compensated lets a rod ten times more damped than its model end bent out of its 3 deg
     band at lqr.q_shaft_angle 325, and holds it straight at 400."""
-    from rodctl.sim.matrix import CASES, ROBUST_BAND_DEG, run_case
+    from rodctl.sim.matrix import CASES, IDEAL_GEARBOX, ROBUST_BAND_DEG, run_case
 
-    p = load_params(None, list(RIG_S4_1) + ["lqr.friction_compensation=7.1845e-03"])
+    p = load_params(None, list(RIG_S4_1) + ["lqr.friction_compensation=7.1845e-03", *IDEAL_GEARBOX])
     ends = {q: run_case(p.with_overrides(f"lqr.q_shaft_angle={q!r}"), CASES["damping*10"], "balance")
             for q in (325.0, 400.0)}
     assert not ends[325.0]["passed"] and ends[325.0]["final_dev_deg"] > 2 * ROBUST_BAND_DEG, ends[325.0]
@@ -183,11 +183,13 @@ def test_on_rig_s4_1_only_the_stiffer_shaft_holds_the_damped_rod():
 
 
 def test_rig_a_meets_the_nominal_goals_with_the_chosen_compensation(tmp_path):
-    """Rig A (T_c 4 mN m): the identified file with the nominal 7.4 mN m settles balance in 1.64 s (goal 1.5 s).
-    The compensation chosen on the identified rig meets both nominal goals on the hidden plant."""
-    from rodctl.sim.matrix import BALANCE_SETTLE_GOAL_S, CASES, SWINGUP_SETTLE_GOAL_S, run_case
+    """Rig A (T_c 4 mN m) with an ideal gearbox: the identified file with the nominal 7.4 mN m settles balance
+    in 1.64 s (goal 1.5 s). The compensation chosen on the identified rig meets both nominal goals on the
+    hidden plant."""
+    from rodctl.sim.matrix import BALANCE_SETTLE_GOAL_S, CASES, IDEAL_GEARBOX, SWINGUP_SETTLE_GOAL_S, run_case
 
-    mine, hidden = _identified("A", tmp_path), hidden_params("A")
+    mine = _identified("A", tmp_path).with_overrides(*IDEAL_GEARBOX)
+    hidden = hidden_params("A").with_overrides(*IDEAL_GEARBOX)
     before = run_case(mine, CASES["nominal"], "balance", plant_params=hidden)
     assert not before["passed"] and before["settle_s"] > BALANCE_SETTLE_GOAL_S, before
     choice = C.choose(mine, cases="nominal", jobs=2, progress=False)

@@ -416,7 +416,7 @@ def test_plant_option_judges_the_design_on_another_rod(tmp_path, capsys):
         runs[tag] = {r["task"]: r for r in docs[tag]["runs"]}
     for task in ("balance", "swingup"):
         own, other = runs["own"][task], runs["far"][task]
-        assert own["fault_reason"] == 0 and own["final_dev_deg"] < 3, own
+        assert own["fault_reason"] == 0 and own["final_dev_deg"] < 5, own  # 3 s on the rig with play
         assert not other["passed"] and other["fault_reason"] != 0, other
         assert own["plant"].startswith("der, 30 edges") and other["plant"].startswith("inextensible, 10 edges")
     assert docs["far"]["plant_source"] == str(far) and docs["own"]["plant_source"] is None

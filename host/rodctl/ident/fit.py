@@ -67,6 +67,10 @@ FIT_PARAMS = (
     FitParam("torque_constant_scale", None, "-", (0.2, 5.0), (0.5, 2.0), 1.0),
     FitParam("youngs_modulus", "rod.youngs_modulus", "Pa", (1e4, 1e8), (5e4, 1e7), 6e5),
     FitParam("damping", "rod.damping", "N m s/rad", (0.0, 0.1), (0.0, 0.05), 1e-3),
+    # between the encoder and the rod: the gearbox's play (a torque reversal crosses it) and where the
+    # boot zero sits from the rod's true hanging (the rod's free swings center on the latter)
+    FitParam("backlash", "gearbox.backlash_deg", "deg", (0.0, 6.0), (0.0, 5.0), 1.0),
+    FitParam("zero_error", "encoder.zero_error_deg", "deg", (-3.0, 3.0), (-2.0, 2.0), 0.2),
 )
 NAMES = tuple(p.name for p in FIT_PARAMS)
 
@@ -119,16 +123,20 @@ class Simulator:
 
         plant = faithful_plant(params, input_mode="duty")
         cpr = float(params.counts_per_rev)
+        zero = math.radians(params["encoder"]["zero_error_deg"])
         out = []
         fp = ctypes.POINTER(ctypes.c_float)
         for r, duty, torque in zip(self.records, self._duty, self._torque):
-            theta0 = 2 * math.pi * r.count[0] / cpr
+            # at rest at the first count: the rod straight there, the motor side in the middle of the gap
+            theta0 = 2 * math.pi * r.count[0] / cpr - zero
             plant.set_state(np.full(plant.N, theta0))
             plant.time = 0.0
             self._ctl.lib.rod_replay_load(duty.ctypes.data_as(fp), torque.ctypes.data_as(fp), len(duty),
                                           ctypes.c_float(r.period))
             try:
-                th = run_closed_loop(plant, self._ctl, len(duty), reset=False)["theta"][:, 0]
+                log = run_closed_loop(plant, self._ctl, len(duty), reset=False)
+                # what the encoder reads: the motor side (or the hub, for an output-shaft encoder), off by the zero
+                th = (log["theta"][:, 0] if plant.config.encoder_on_shaft else log["motor"]) + zero
             except SimulationError:  # the plant left its model (a wild trial point): a large residual
                 th = np.full(len(duty), theta0 + 10.0)
             out.append(th)

@@ -137,7 +137,9 @@ class Scenario:
     paper: str  # which figure/section it reproduces, or "" for testbed checks
     run: Callable[["Options"], Outcome]
     group: str = "paper"
-    expect_pass: bool = True  # False: a documented failure (the README says why and what passes instead)
+    # True: must pass; False: a documented failure (docs/control.md says why and what passes instead);
+    # None: measured, not asserted (an in-range matrix case: with the gearbox's play a coin flip near the band)
+    expect_pass: bool | None = True
 
 
 @dataclass
@@ -377,10 +379,12 @@ def _register(s: Scenario) -> None:
     SCENARIOS[s.name] = s
 
 
-_register(Scenario("swingup", "Swing-up and balance on the testbed (Table I rod, motor, driver, encoder)", "",
-                   swingup, "testbed"))
-_register(Scenario("balance", "Balance from 30 deg: output feedback, quantization, torque limit", "(d)",
-                   balance, "testbed"))
+# With 1 deg of gearbox play the nominal rig holds the rod within the matrix's 3 deg band, not the
+# 1 deg goal: a documented failure (docs/control.md "What the matrix shows").
+_register(Scenario("swingup", "Swing-up and balance on the testbed (Table I rod, motor, gearbox, driver, encoder)", "",
+                   swingup, "testbed", expect_pass=False))
+_register(Scenario("balance", "Balance from 30 deg: output feedback, quantization, torque limit, gearbox", "(d)",
+                   balance, "testbed", expect_pass=False))
 _register(Scenario("fig2", "Zero input vs clamped base vs state feedback, N = 20, L = 12 cm", "Fig. 2", fig2))
 _register(Scenario("fig3", "Swing-up (0.01 N m, 30 deg) and switch to output feedback, paper's model", "Fig. 3",
                    fig3))
@@ -393,7 +397,7 @@ def _register_robust() -> None:
             continue  # that is `balance` and `swingup`
         known = any((case.name, t) in KNOWN_FAILURES for t in case.tasks)
         _register(Scenario(f"robust-{case.name}", f"Robustness: {case.title}", "(e)", robust(f"robust-{case.name}"),
-                           "robustness", expect_pass=not known))
+                           "robustness", expect_pass=False if known else None))
     # The paper's bare-rod design on the real motor: 11 x the base inertia it assumed. It fails, which is
     # why the default design includes the motor (motor.design_includes_motor = true).
     _register(Scenario("robust-motor", "Robustness: the paper's design, which leaves the motor out", "(e)",
