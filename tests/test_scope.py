@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import os
+import queue
 import shutil
 import signal
 import subprocess
+import threading
 import time
 from types import SimpleNamespace
 
@@ -127,6 +129,7 @@ def test_keys_and_buttons_arm_set_record_and_disarm(tmp_path):
         scope._key(SimpleNamespace(key="r"))  # start recording
         scope._key(SimpleNamespace(key="b"))
         assert s.wait_telemetry(timeout=5).mode == P.Mode.BALANCE
+        assert scope.message == "armed balance"  # not the mode at the ack (CATCH), stale at once
         scope.action("set", "swing_amplitude=0.03")
         assert "swing_amplitude = 0.03" in scope.message
         scope.action("set", "swing_amplitude=0.03 catch_angle_deg=1e42")
@@ -136,6 +139,11 @@ def test_keys_and_buttons_arm_set_record_and_disarm(tmp_path):
         x, y = scope.rod.get_data()
         assert y[-1] > 0.9 * 0.031 * s.hello.n  # the drawn rod is the estimate: upright
         assert "theta1" in scope.status.get_text() and "from upright" in scope.status.get_text()
+        time.sleep(1.2)
+        scope.update()
+        lo, hi = scope.ax_th.get_ylim()
+        assert -30 < lo < 0 < hi < 30  # balanced: the angle panel zooms to upright
+        assert scope.ax_tq.get_ylabel() == "torque [mN m]" and scope.ax_du.get_ylim() == (-1.05, 1.05)
         scope._key(SimpleNamespace(key="d"))
         assert scope.message.startswith("disarmed")
         scope._key(SimpleNamespace(key="r"))  # stop recording
@@ -144,3 +152,69 @@ def test_keys_and_buttons_arm_set_record_and_disarm(tmp_path):
     assert len(log.data) > 300 and "BALANCE" in set(log.data["mode_name"])
     notes = [e for e in log.events["info_text"] if "recording" in e]
     assert notes == ["recording started (scope)", "recording stopped (scope)"]
+
+
+
+def _xdotool(display: str, *args: str) -> str:
+    return subprocess.run(["xdotool", *args], env={**os.environ, "DISPLAY": display}, capture_output=True,
+                          text=True, timeout=30).stdout
+
+
+def test_each_key_does_what_the_window_says_and_no_dialog_opens(xdisplay, tmp_path):
+    """Real key events (XTEST, xdotool) in the real Tk window: s arms swing-up at the key press, d and space
+    disarm, b arms balance, r records, c clears, q quits; matplotlib's own bindings (s save, c back, r home,
+    q quit) are off, so no window but the scope's ever opens."""
+    if shutil.which("xdotool") is None:
+        pytest.fail("xdotool is not installed (bash .ci/run installs it)")
+    env = rodctl_env(DISPLAY=xdisplay)
+    env.pop("MPLBACKEND", None)
+    proc = subprocess.Popen([*RODCTL, "scope", "--port", "sim://?theta0_deg=150", "--duration", "90"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+    said: list[str] = []
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(ln) for ln in proc.stderr], daemon=True).start()
+
+    def press(key: str, expect: str) -> None:
+        _xdotool(xdisplay, "key", key)
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
+            try:
+                line = lines.get(timeout=1.0)
+            except queue.Empty:
+                continue
+            said.append(line)
+            if line.startswith("scope: ") and not line.startswith("scope: sim://"):
+                assert line.strip().startswith(f"scope: {expect}"), said
+                windows = _xdotool(xdisplay, "search", "--onlyvisible", "--name", ".").split()
+                assert len(windows) <= 1, (key, windows)  # the scope's (gone after q), no dialog
+                return
+        raise AssertionError(f"no answer to {key!r}: {said}")
+
+    try:
+        wid = []
+        deadline = time.monotonic() + 60
+        while not wid and time.monotonic() < deadline:  # the window is mapped and drawing
+            wid = _xdotool(xdisplay, "search", "--onlyvisible", "--name", "rodctl scope").split()
+            time.sleep(0.5)
+        assert len(wid) == 1, (wid, proc.poll())
+        time.sleep(2.0)
+        _xdotool(xdisplay, "windowfocus", "--sync", wid[0])
+        press("s", "armed swing-up")
+        press("d", "disarmed")
+        press("b", "armed balance")
+        press("space", "disarmed")
+        press("c", "fault cleared: DISARMED")
+        press("r", "recording to rod-")
+        press("r", "recorded rod-")
+        press("q", "quit")
+        proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    time.sleep(0.5)
+    while not lines.empty():
+        said.append(lines.get())
+    assert proc.returncode == 0, said
+    assert not any("Traceback" in ln for ln in said) and said[-1].startswith("scope ended: disarmed"), said
+    assert len([f for f in tmp_path.glob("rod-*.csv") if not f.name.endswith(".events.csv")]) == 1

@@ -25,6 +25,7 @@ from rodgains.errors import UserError
 from rodctl.link import protocol as P
 
 ROD_COLOR = "#ff0000"  # nothing else in the window is pure red: the Xvfb test finds the rod by it
+BALANCED_ZOOM_S = 1.0  # balanced this long: the angle panel zooms to upright [s]
 KEYS = {"s": "swing-up", "b": "balance", "d": "disarm", " ": "disarm", "c": "clear", "r": "record", "q": "quit"}
 
 
@@ -115,11 +116,15 @@ class Scope:
         self.ax_th.set_yticks(range(-180, 181, 90))
         self.ax_th.set_ylabel("from upright [deg]")
         if self.n <= 10:
-            self.ax_th.legend(fontsize=7, loc="upper left", ncol=min(5, self.n))
-        self.line_tq, = self.ax_tq.plot([], [], color="C1", lw=0.9, label="torque [N m]")
-        self.line_du, = self.ax_tq.plot([], [], color="C4", lw=0.9, label="duty")
-        self.ax_tq.set_ylim(-1.05, 1.05)
-        self.ax_tq.legend(fontsize=7, loc="upper left")
+            self.ax_th.legend(fontsize=8, loc="upper left", ncol=min(5, self.n))
+        # torque and duty on axes of their own: a 30 mN m ripple must show beside a duty of 0.5
+        self.line_tq, = self.ax_tq.plot([], [], color="C1", lw=0.9, label="torque [mN m]")
+        self.ax_tq.set_ylabel("torque [mN m]", color="C1")
+        self.ax_du = self.ax_tq.twinx()
+        self.line_du, = self.ax_du.plot([], [], color="C4", lw=0.7, alpha=0.7, label="duty")
+        self.ax_du.set_ylim(-1.05, 1.05)
+        self.ax_du.set_ylabel("duty [-]", color="C4")
+        self.ax_tq.legend(handles=[self.line_tq, self.line_du], fontsize=9, loc="upper left")
         self.line_mo, = self.ax_mo.step([], [], where="post", color="k")
         self.ax_mo.set_yticks(range(len(MODE_NAMES)), MODE_NAMES, fontsize=7)
         self.ax_mo.set_ylim(-0.5, len(MODE_NAMES) - 0.5)
@@ -139,6 +144,11 @@ class Scope:
             self.buttons.append(b)
         self.setbox = TextBox(fig.add_axes((0.66, 0.02, 0.32, 0.05)), "set ", initial="")
         self.setbox.on_submit(self._set_submitted)
+        # the scope owns its keys: matplotlib's own bindings (s save, c back, r home, q quit, ...) would
+        # open a dialog and arm the board when it is dismissed
+        handler = getattr(getattr(fig.canvas, "manager", None), "key_press_handler_id", None)
+        if handler is not None:
+            fig.canvas.mpl_disconnect(handler)
         fig.canvas.mpl_connect("key_press_event", self._key)
         fig.canvas.mpl_connect("close_event", lambda _e: setattr(self, "closed", True))
 
@@ -160,16 +170,17 @@ class Scope:
 
         s = self.s
         try:
+            # the mode at the ack goes stale at once (CATCH becomes BALANCE): the status line has the live one
             if name in ("swing-up", "balance"):
                 mode = P.ArmMode.SWING_UP if name == "swing-up" else P.ArmMode.BALANCE
-                ack = s.arm(mode)
-                self.message = f"armed {name}: mode {name_of(P.Mode, ack.mode)}"
+                s.arm(mode)
+                self.message = f"armed {name}"
             elif name == "disarm":
-                ack = s.disarm()
-                self.message = f"disarmed: mode {name_of(P.Mode, ack.mode)}"
+                s.disarm()
+                self.message = "disarmed"
             elif name == "clear":
                 ack = s.clear_fault()
-                self.message = f"fault cleared: mode {name_of(P.Mode, ack.mode)}"
+                self.message = f"fault cleared: {name_of(P.Mode, ack.mode)}"
             elif name == "record":
                 self.toggle_recording()
             elif name == "set":
@@ -180,8 +191,10 @@ class Scope:
                 self.message = "; ".join(done)
             elif name == "quit":
                 self.stop_requested = True
+                self.message = "quit"
         except UserError as e:
             self.message = f"refused: {e}"
+        print(f"scope: {self.message}", file=sys.stderr, flush=True)
 
     def toggle_recording(self) -> None:
         from rodctl.cli.common import default_log_name, design_params
@@ -244,8 +257,20 @@ class Scope:
             dev = np.degrees(from_upright(th))
             for i, ln in enumerate(self.lines_th):
                 ln.set_data(t, dev[:, i])
-            self.line_tq.set_data(t, tq)
+            self.line_tq.set_data(t, 1e3 * tq)
             self.line_du.set_data(t, du)
+            shown = t >= -self.window_s
+            top = max(5.0, 1.15 * float(np.max(np.abs(1e3 * tq[shown])))) if shown.any() else 5.0
+            self.ax_tq.set_ylim(-top, top)
+            # balanced for the last second: the error is degrees, not half a turn, so zoom to upright
+            recent = t >= -BALANCED_ZOOM_S
+            if (mo[recent] == P.Mode.BALANCE).all():
+                span = max(2.0, 1.2 * float(np.max(np.abs(dev[recent]))))
+                self.ax_th.set_ylim(-span, span)
+                self.ax_th.set_yticks(np.linspace(-span, span, 5).round(1))
+            else:
+                self.ax_th.set_ylim(-185, 185)
+                self.ax_th.set_yticks(range(-180, 181, 90))
             self.line_mo.set_data(t, mo)
             x, y = shape_nodes(th[-1], self.l)
             self.rod.set_data(x, y)
@@ -297,6 +322,7 @@ def run_scope(args) -> int:
             title = (f"{s.port}  firmware {h.fw_major}.{h.fw_minor}.{h.fw_patch}  N={h.n}  parameters "
                      f"{source if params is not None else 'unknown (default rod drawn)'}"
                      + (f"  overrides: {over}" if over else ""))
+            plt.rcParams["toolbar"] = "None"  # no save or zoom dialogs beside the board's controls
             fig = plt.figure(figsize=(12, 7))
             try:
                 fig.canvas.manager.set_window_title(f"rodctl scope {s.port}")
