@@ -168,6 +168,62 @@ def test_a_killed_mcap_log_keeps_its_finished_chunks(tmp_path):
     assert np.array_equal(data["seq_count"], np.arange(1, len(data) + 1))
 
 
+@pytest.mark.parametrize("fmt", ["csv", "mcap"])
+def test_plotting_a_cut_log_says_how_much_was_readable(tmp_path, fmt):
+    from host_tools import run_rodctl
+
+    path = tmp_path / f"cut.{fmt}"
+    w = _write(path, frames=3000)
+    w.flush()
+    if fmt == "mcap":
+        w._sink._f.flush()
+    raw = path.read_bytes()
+    path.write_bytes(raw[:-37] if fmt == "csv" else raw[: len(raw) - 100])
+    n = len(read_log(path).data)
+    r = run_rodctl("plot", str(path), "--out", str(tmp_path / "p.png"))
+    assert r.returncode == 0, r.stderr
+    warning = [ln for ln in r.stderr.splitlines() if ln.startswith("warning: ")]
+    assert len(warning) == 1 and "cut short" in warning[0] and f"{n} telemetry frames readable" in warning[0]
+    assert "no trailer" in warning[0]
+    whole = tmp_path / f"whole.{fmt}"
+    _write(whole).close({"frames": 300})
+    r = run_rodctl("plot", str(whole), "--out", str(tmp_path / "q.png"))
+    assert r.returncode == 0 and "warning" not in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("name, fmt, needle", [
+    ("run.xlsx", None, "a log is .csv, .parquet or .mcap, not .xlsx"),
+    ("run.csv", "parquet", "--format parquet but the name says csv"),
+])
+def test_a_log_name_that_misstates_its_format_is_refused_before_the_board(tmp_path, name, fmt, needle):
+    from host_tools import run_rodctl
+
+    extra = ["--format", fmt] if fmt else []
+    r = run_rodctl("log", "--port", "sim://", "--duration", "0.5", "--out", str(tmp_path / name), *extra)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert needle in r.stderr.strip().splitlines()[-1]
+    assert not list(tmp_path.iterdir())
+
+
+def test_the_log_format_follows_the_extension(tmp_path):
+    from rodctl.logs.writer import log_format
+
+    assert [log_format(f"a.{e}") for e in ("csv", "parquet", "pq", "mcap", "CSV")] == \
+        ["csv", "parquet", "parquet", "mcap", "csv"]
+    assert log_format("a", "mcap") == "mcap" and log_format("a") == "csv"
+
+
+def test_plot_out_into_a_missing_folder_is_refused_before_reading(tmp_path):
+    from host_tools import run_rodctl
+
+    log = tmp_path / "a.csv"
+    _write(log).close({"frames": 300})
+    r = run_rodctl("plot", str(log), "--out", str(tmp_path / "nope" / "deeper" / "x.png"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert r.stderr.strip().splitlines()[-1].startswith("rodctl: --out ") and "does not exist" in r.stderr
+    assert not (tmp_path / "nope").exists()
+
+
 @pytest.mark.parametrize("src,dst", [("csv", "parquet"), ("parquet", "mcap"), ("mcap", "csv")])
 def test_log_convert_between_formats(tmp_path, src, dst):
     a = tmp_path / f"a.{src}"

@@ -10,7 +10,7 @@ def run_log_convert(args) -> int:
     from rodctl.logs.writer import log_format
 
     src = Path(args.log)
-    fmt = args.format or (log_format(args.out) if args.out else "parquet")
+    fmt = log_format(args.out, args.format) if args.out else (args.format or "parquet")
     out = Path(args.out) if args.out else src.with_suffix("." + fmt)
     convert_log(src, out, fmt=fmt, overwrite=args.force)
     print(f"wrote {out}")

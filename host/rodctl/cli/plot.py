@@ -39,9 +39,18 @@ def run_plot(args) -> int:
         return run_scope(args)
     if not args.log:
         raise UserError("name a log to plot (rodctl plot run.csv), or --live --port PORT")
+    from rodctl.cli.outputs import check_output
     from rodctl.logs.reader import read_log
 
-    meta, data = read_log(args.log, columns=PLOT_COLUMNS)
+    if args.out is not None:  # a single named result: its folder must exist, so a typo is caught
+        check_output(args.out, "--out")
+    from rodctl.logs.reader import cut_short
+
+    log = read_log(args.log, columns=PLOT_COLUMNS)
+    meta, data = log
+    short = cut_short(log)
+    if short:
+        print(f"warning: {short}", file=sys.stderr)
     out = args.out
     if out is None and display_problem() is None:
         import matplotlib.pyplot as plt

@@ -20,7 +20,7 @@ import numpy as np
 from rodgains.errors import InputError
 
 from rodctl.logs import csvlog, mcaplog, parquetlog, schema
-from rodctl.logs.writer import LogWriter, log_format
+from rodctl.logs.writer import EXTENSIONS, LogWriter, log_format
 
 
 class Log(tuple):
@@ -58,7 +58,7 @@ def detect_format(path: Path) -> str:
         return "parquet"
     if head.startswith(mcaplog.MAGIC):
         return "mcap"
-    named = log_format(path)
+    named = EXTENSIONS.get(path.suffix.lower(), "csv")  # what the name claims, for the message
     if named == "parquet":
         raise InputError(f"{path}: not a Parquet file (no PAR1 magic)")
     if named == "mcap":
@@ -170,6 +170,23 @@ def read_log(path: str | Path, columns: list[str] | None = None) -> Log:
     if "seq_count" in order and data.size and np.any(np.diff(data["seq_count"]) < 0):
         meta["seq_restarts"] = meta.get("seq_restarts", "1")
     return Log(meta, data, _events_array(events), fmt, path)
+
+
+def cut_short(log: "Log") -> str | None:
+    """One line saying how much of a log was readable when it was cut short (a kill, a full disk, a
+    copied file still growing): a row cut in half, or no trailer (the logger never closed it). None
+    for a complete log."""
+    meta, data = log
+    bad = int(meta.get("incomplete_rows", "0") or 0)
+    closed = "closed_utc" in meta  # the trailer is written at a clean close
+    if not bad and closed:
+        return None
+    why = []
+    if bad:
+        why.append(f"{bad} cut row{'s' if bad != 1 else ''} skipped")
+    if not closed:
+        why.append("no trailer: the logger never closed it")
+    return f"{log.path}: cut short ({'; '.join(why)}); {len(data)} telemetry frames readable"
 
 
 def convert_log(src: str | Path, out: str | Path, fmt: str | None = None, overwrite: bool = False) -> Path:

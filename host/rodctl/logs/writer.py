@@ -26,14 +26,24 @@ FLUSH_INTERVAL_S = {"csv": 0.25, "parquet": 5.0, "mcap": 0.25}
 _NAN = float("nan")
 
 
+EXTENSIONS = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet", ".mcap": "mcap"}
+
+
 def log_format(path: str | Path, fmt: str | None = None) -> str:
-    """The format of a log path: fmt when given, else from the extension (.parquet, .mcap; else csv)."""
-    if fmt:
-        if fmt not in FORMATS:
-            raise InputError(f"unknown log format {fmt!r}: {', '.join(FORMATS)}")
-        return fmt
-    s = str(path).lower()
-    return "parquet" if s.endswith(".parquet") else "mcap" if s.endswith(".mcap") else "csv"
+    """The format to write a log path in: the extension's (.csv, .parquet, .mcap), or fmt, which must
+    agree with it; a name with no extension takes fmt, else csv. An unknown extension (run.xlsx) or one
+    that contradicts fmt is refused (one line) rather than written in a format its name misstates."""
+    if fmt and fmt not in FORMATS:
+        raise InputError(f"unknown log format {fmt!r}: {', '.join(FORMATS)}")
+    ext = Path(str(path)).suffix.lower()
+    if not ext:
+        return fmt or "csv"
+    if ext not in EXTENSIONS:
+        raise InputError(f"{path}: a log is .csv, .parquet or .mcap, not {ext} (pandas and spreadsheets read all "
+                         "three: rodctl log-convert)")
+    if fmt and EXTENSIONS[ext] != fmt:
+        raise InputError(f"{path}: --format {fmt} but the name says {EXTENSIONS[ext]}; name it .{fmt} or drop --format")
+    return EXTENSIONS[ext]
 
 
 def require_format(fmt: str) -> None:
