@@ -113,3 +113,16 @@ def test_sim_compile_failure_is_one_clear_line(tmp_path):
     assert "Traceback" not in r.stderr and "internal error" not in r.stderr
     assert r.stderr.strip().splitlines()[-1] == ("rodctl: compiling rodsil failed: "
                                                  "rod_config.h:97:1: error: static assertion failed")
+
+
+@pytest.mark.parametrize("override, line", [
+    ("rod.length=155", "rodctl: rod.length = 155 m is not a testbed's (plausible: 0.02 to 2 m): did you mean 0.155 m?"),
+    ("rod.youngs_modulus=593",
+     "rodctl: rod.youngs_modulus = 593 Pa is not a testbed's (plausible: 1000 to 2e+11 Pa): did you mean 593000 Pa?"),
+])
+def test_a_unit_slip_is_refused_with_the_reading_that_fits(override, line, tmp_path):
+    from host_tools import run_rodctl
+
+    r = run_rodctl("gains", "--set", override, "--header", str(tmp_path / "h.h"))
+    assert r.returncode == 2 and r.stderr.strip() == line
+    assert not (tmp_path / "h.h").exists()

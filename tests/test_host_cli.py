@@ -175,3 +175,24 @@ def test_live_plot_runs_in_a_window_under_a_virtual_display():
                         "--duration", "2"], capture_output=True, text=True, timeout=120, env=env)
     assert r.returncode == 0, r.stderr
     assert "Traceback" not in r.stderr
+
+
+def test_help_texts_print_their_percent_signs_once():
+    from host_tools import run_rodctl
+
+    r = run_rodctl("identify", "--help")
+    assert r.returncode == 0 and "95 % intervals" in r.stdout and "%%" not in r.stdout
+
+
+def test_every_file_the_parameter_file_cites_is_in_the_repository(tmp_path):
+    """rodctl params writes the default file's source notes: a cited file must exist in the clone."""
+    import re
+
+    from host_tools import run_rodctl
+    from rodctl import paths
+
+    out = tmp_path / "p.toml"
+    assert run_rodctl("params", "--out", str(out)).returncode == 0
+    cited = set(re.findall(r"\b((?:docs|firmware|host|gains)/[\w./-]+\.(?:md|toml|c|h|py))", out.read_text()))
+    assert "docs/physics-notes.md" in cited
+    assert all((paths.REPO / c).is_file() for c in cited), [c for c in cited if not (paths.REPO / c).is_file()]

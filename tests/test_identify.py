@@ -173,6 +173,12 @@ def test_written_file_is_complete_and_loads(tmp_path):
     p = load_params(f)
     assert p["motor"]["rotor_inertia"] == pytest.approx(res.values["rotor_inertia"])
     assert "ab" * 32 in f.read_text()
+    lines = {ln.split("=")[0].strip(): ln for ln in f.read_text().splitlines() if "=" in ln and not ln.startswith("#")}
+    # every value identify set names it as the source, not the default file's (Table I, the tuning)
+    assert lines["youngs_modulus"].endswith("# E [Pa]   [rodctl identify]"), lines["youngs_modulus"]
+    assert "[T1]" not in lines["youngs_modulus"] and "[E]" not in lines["rotor_inertia"]
+    assert lines["backlash_deg"].endswith("[rodctl identify]")
+    assert lines["length"].endswith("[T1]")  # a value it did not touch keeps its source
 
 
 def test_identify_over_sim_with_a_hidden_plant(tmp_path):

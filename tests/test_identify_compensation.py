@@ -225,6 +225,8 @@ def check_written_compensation(out, stdout: str) -> None:
     fc, tc = p["lqr"]["friction_compensation"], p["motor"]["coulomb_friction"]
     nominal = load_params()["lqr"]["friction_compensation"]
     assert f"{fc / tc:.3g}" == f"{ratio:.3g}"  # the comment states the ratio to 3 digits
+    line = next(ln for ln in text.splitlines() if ln.startswith("friction_compensation ="))
+    assert line.endswith("[rodctl identify]") and "about 1.5 x" not in line, line  # not the default file's source
     assert fc == pytest.approx(nominal) or any(fc == pytest.approx(r * tc, rel=1e-9) for r in C.RATIOS)
     lines = [ln for ln in text.splitlines() if ln.startswith("# ^   ") and " passed" in ln]
     stiff = [ln for ln in lines if "with lqr.q_shaft_angle" in ln]  # the second stage's, if it ran

@@ -1,6 +1,6 @@
 """Self-buckling lengths: the continuum (Greenhill) value and the N-link model's own.
 
-Eq. (23) of the paper has its numeric factors swapped (physics-notes.md). The correct
+Eq. (23) of the paper has its numeric factors swapped (docs/physics-notes.md). The correct
 Greenhill length of a clamped column under its own weight is
 
     L^3 = (9 B^2 / 4) E I / (rho g A),  B = 1.8663 (first zero of J_{-1/3}),

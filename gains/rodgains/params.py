@@ -259,6 +259,43 @@ def check_firmware_limits(p: dict) -> list[tuple[str, str]]:
     return out
 
 
+# Physical values outside these are not a testbed's [the key's unit]: a slip of units, most often (mm typed
+# as m, kPa as Pa). Refused with the nearest reading that would fit ("155 m: did you mean 0.155 m?").
+# Wide on purpose: a research rig may be far from Table I, not a thousand times.
+PLAUSIBLE: dict[str, tuple[float, float]] = {
+    "rod.length": (0.02, 2.0),
+    "rod.width": (0.001, 0.5),
+    "rod.thickness": (0.0005, 0.1),
+    "rod.density": (100.0, 20000.0),
+    "rod.youngs_modulus": (1e3, 2e11),
+    "rod.damping": (0.0, 1.0),
+    "rod.gravity": (0.0, 30.0),
+    "motor.gear_ratio": (1.0, 1000.0),
+    "motor.torque_constant": (1e-4, 1.0),
+    "motor.back_emf_constant": (0.0, 1.0),
+    "motor.resistance": (0.01, 1000.0),
+    "motor.rotor_inertia": (0.0, 1e-3),
+    "motor.viscous_friction": (0.0, 1.0),
+    "motor.coulomb_friction": (0.0, 1.0),
+    "plant.hub_length": (0.0, 1.0),
+    "driver.current_limit": (0.01, 50.0),
+    "gearbox.output_inertia": (0.0, 1e-3),
+    "safety.torque_limit": (1e-3, 10.0),
+    "safety.speed_limit": (0.1, 1000.0),
+    "swing_up.amplitude": (0.0, 10.0),
+}
+_UNIT_SLIPS = (1e-3, 1e3, 1e-2, 1e2, 1e-6, 1e6, 1e-1, 10.0)
+
+
+def _implausible(name: str, unit: str, value: float) -> str | None:
+    lo, hi = PLAUSIBLE[name]
+    if lo <= value <= hi:
+        return None
+    guess = next((value * f for f in _UNIT_SLIPS if lo <= value * f <= hi and value != 0), None)
+    hint = f": did you mean {guess:g} {unit}?" if guess is not None else ""
+    return f"{value:g} {unit} is not a testbed's (plausible: {lo:g} to {hi:g} {unit}){hint}"
+
+
 def _coerce(name: str, key: Key, value: Any) -> Any:
     kind = key.kind
     if kind is bool:
@@ -280,6 +317,10 @@ def _coerce(name: str, key: Key, value: Any) -> Any:
         problem = key.check(value)
         if problem:
             raise ParamError(f"{name}: {problem} [{key.unit}], got {value!r}")
+    if name in PLAUSIBLE:
+        problem = _implausible(name, key.unit, value)
+        if problem:
+            raise ParamError(f"{name} = {problem}")
     return value
 
 

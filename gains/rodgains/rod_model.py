@@ -4,7 +4,7 @@ State q = [theta_1..theta_N, dtheta_1..dtheta_N]: absolute edge angles [rad] wit
 down and pi upright, and their rates [rad/s]. Input T: torque on edge 1 at the motor axis
 [N m], positive accelerating theta_1. Node 0 sits on the axis.
 
-Departures from the printed paper (see physics-notes.md):
+Departures from the printed paper (see docs/physics-notes.md):
 - eq. (10) gravity uses sin(theta_i) for every i (the paper prints sin(theta_1));
 - the motor adds a base inertia J to M_11 and a viscous friction b to D_11 (J = b = 0 is the paper).
 """

@@ -341,9 +341,9 @@ def register(sub) -> None:
         description="With --port: run the identification experiments (default: " + names + ") with the rod "
                     "hanging, asking before each one moves the motor, log each, then fit. With LOG files: fit "
                     "recorded logs. The fit identifies rotor inertia, viscous and Coulomb friction, a "
-                    "torque-constant scale and the rod's Young's modulus and damping against the project's C "
-                    "plant, chooses the dry-friction compensation for the identified rig by the robustness "
-                    "matrix, and writes a complete parameter file with 95 %% intervals. Exit 2: bad input or "
+                    "torque-constant scale, the rod's Young's modulus and damping, the gearbox's backlash and the "
+                    "encoder's zero error against the project's C plant, chooses the dry-friction compensation for the identified rig by the robustness "
+                    "matrix, and writes a complete parameter file with 95 % intervals. Exit 2: bad input or "
                     "data that cannot identify the rig; exit 1: a value outside its physical range (not written).",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("logs", nargs="*", metavar="LOG", help="recorded logs to fit instead of running experiments")

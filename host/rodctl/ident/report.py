@@ -35,6 +35,17 @@ def identified_params(params, res: FitResult):
     return with_values(params, written_values(res)[0])
 
 
+def _identified_comment(line: str) -> str:
+    """The default file's comment on a line identify rewrote, its source tag ([T1], "[T]: about 1.5 x ...")
+    replaced: the description up to its unit stays, the source is now this rig."""
+    if "#" not in line:
+        return line
+    value, comment = line.split("#", 1)
+    unit_end = comment.find("]")
+    what = comment[:unit_end + 1].rstrip() if unit_end >= 0 else comment.rstrip()
+    return f"{value}#{what}   [rodctl identify]"
+
+
 def parameter_file(params, res: FitResult, log_digests: list[tuple[str, str]], compensation=None) -> str:
     """A complete parameter file: params with the identified values, each commented with its interval,
     headed by the SHA-256 of every log the values came from. compensation: the friction compensation
@@ -48,6 +59,11 @@ def parameter_file(params, res: FitResult, log_digests: list[tuple[str, str]], c
     text = out.to_toml()
     # Comments go on the lines of the keys that carry each fitted value (the scale lives in k_t and k_e).
     keys = {fp.name: ([fp.key] if fp.key else ["motor.torque_constant", "motor.back_emf_constant"]) for fp in FIT_PARAMS}
+    rewritten = {k for name, ks in keys.items() if name in notes for k in ks}
+    if compensation is not None:
+        rewritten.add("lqr.friction_compensation")
+        if compensation.best.shaft_weight is not None:
+            rewritten.add("lqr.q_shaft_angle")
     lines, section = [], None
     for line in text.splitlines():
         head = line.split("#", 1)[0].strip()
@@ -55,6 +71,8 @@ def parameter_file(params, res: FitResult, log_digests: list[tuple[str, str]], c
             section = head[1:-1].strip()
         elif "=" in head and section:
             key = f"{section}.{head.split('=', 1)[0].strip()}"
+            if key in rewritten:
+                line = _identified_comment(line)
             for name, ks in keys.items():
                 if key in ks and name in notes:
                     what = notes[name] if name != "torque_constant_scale" else f"torque-constant scale: {notes[name]}"

@@ -2,7 +2,7 @@
 
     meta, data = read_log("run.csv")                    # data: numpy structured array, one row per frame
     log = read_log("run.mcap", columns=["time_s", "theta_hat_*"])   # only what you need (bounded memory)
-    log.events                                          # HELLO / ACK / MODE / NOTE rows
+    log.events                                          # HELLO / ACK / MODE / NOTE rows: the log's, not data's
     df = pandas.DataFrame(data)                         # or pandas.read_csv / read_parquet directly
 
 The format is recognized from the file's first bytes, not its name. Anything that is not a
