@@ -189,10 +189,11 @@ def stiff_guarded():
     return design(load_params(MATRIX_FILE, list(STIFF_RIG)))
 
 
-def _restarts(monkeypatch, ends, holds, restarts):
+def _restarts(monkeypatch, ends, holds, restarts, made_by=None):
     """The refinement of robust-matrix.toml, with fakes at its edges: L-BFGS run i ends at ends[i] =
     (cost, one scale for every gain entry), and the guard's call j (from 1: one per run, then the
-    walk-back's) holds if holds(j). Returns (design, gain scales of the design kept, L-BFGS runs made)."""
+    walk-back's) holds if holds(j). Returns (design, gain scales of the design kept, L-BFGS runs made);
+    with made_by: (what made_by() returns, None, L-BFGS runs made)."""
     from types import SimpleNamespace
 
     import numpy as np
@@ -216,6 +217,8 @@ def _restarts(monkeypatch, ends, holds, restarts):
 
     monkeypatch.setattr(R, "minimize", minimize)
     monkeypatch.setattr(large_signal, "guard", guard)
+    if made_by is not None:
+        return made_by(), None, len(made)
     d = design(load_params(MATRIX_FILE))
     lqg = design(load_params(MATRIX_FILE, ["design.method=sampled"]))
     return d, d.K[0] / lqg.K[0] - 1.0, len(made)
@@ -392,3 +395,20 @@ def test_the_stiff_shaft_is_what_holds_ten_times_the_damping(task):
         assert (radius < 0.9996) if stable else (radius > 1.003), (p.source, radius)  # 0.99947, 1.0039
     r = matrix.run_case(soft, damped, task)
     assert not r["passed"] and r["final_dev_deg"] > 90.0, r  # the default holds it: tests/test_robustness_matrix.py
+
+
+def test_rodctl_gains_shows_each_refinement_run_and_nothing_when_cached(monkeypatch, tmp_path, capsys):
+    """A robust design on a new file takes up to half a minute: each L-BFGS run is announced as it
+    starts (three of at most five here: the last two could not change the choice); the same file
+    again comes from the cache, at once and silent."""
+    from rodctl.cli import main
+
+    header = tmp_path / "g.h"
+    argv = ["gains", "--params", str(MATRIX_FILE), "--header", str(header)]
+    rc, _, made = _restarts(monkeypatch, [(0.5, 0.1)] * 5, lambda call: True, restarts=5,
+                            made_by=lambda: main(argv))
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 0 and made == 3
+    assert err[0].startswith("rodctl: refining the gains on the robust model family (design.method = robust)")
+    assert err[1:] == [f"  run {i} of at most 5" for i in (1, 2, 3)]
+    assert main(argv) == 0 and capsys.readouterr().err == ""

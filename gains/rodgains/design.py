@@ -173,7 +173,7 @@ class Design:
         }
 
 
-def design(p: Params) -> Design:
+def design(p: Params, progress=None) -> Design:
     """Design the firmware's gains for `p` (a Params from load_params).
 
     Returns a Design (see its docstring for shapes and conventions). Raises DesignRefused (a
@@ -242,7 +242,7 @@ def design(p: Params) -> Design:
     if d.method == "robust":  # the LQG gains refined to hold a family of rods (robust_design.py)
         from .robust_design import refine
 
-        ref = refine(p, dt, *d.estimator(), disturbance=Lw != 0.0)
+        ref = refine(p, dt, *d.estimator(), disturbance=Lw != 0.0, progress=progress)
         d.K, d.L, d.Lw = ref.K, ref.L, ref.Lw
         checks["robust_family_radii"] = ref.radii
         checks["robust_family_radii_lqg"] = ref.radii_lqg

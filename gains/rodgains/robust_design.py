@@ -246,7 +246,9 @@ class Refined:
 _MEMO: dict[str, Refined] = {}
 
 
-def refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refined:
+def refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool, progress=None) -> Refined:
+    """The refined gains (memoized, and cached on disk). progress(run, most): called as each of at most
+    `most` L-BFGS runs starts (1-based), only when the refinement is computed, not found in a cache."""
     # the module's constants too: the source hash covers them as written, not as a caller (a test) sets them
     settings = (dt, disturbance, NOMINAL_WEIGHT, MAX_ITER, NOMINAL_DECAY_WEIGHT, NOISE_WEIGHT, SCALE_BOUNDS, BACKTRACK,
                 RESTARTS, NUDGE, SAME_DESIGN)
@@ -259,7 +261,7 @@ def refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refin
             except (KeyError, TypeError, ValueError):
                 record = None
         if record is None:
-            _MEMO[key] = _refine(p, dt, Ao, Bo, Co, Ko, Lo, disturbance)
+            _MEMO[key] = _refine(p, dt, Ao, Bo, Co, Ko, Lo, disturbance, progress)
             design_cache.store(key, _to_record(_MEMO[key]))
     return _MEMO[key]
 
@@ -314,7 +316,7 @@ def settled(found: list, left: int) -> bool:
     return len(groups[0]) > second + left
 
 
-def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refined:
+def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool, progress=None) -> Refined:
     """Scale every entry of the LQG gains to hold the family below design.robust_radius (module
     docstring). With a disturbance state (`disturbance`), the estimator is (Ao, Bo, Co) with it
     appended, Ko = [K, 1] and Lo = [L; Lw]; else Ko = K, Lo = L and Lw stays 0."""
@@ -377,6 +379,8 @@ def _refine(p: Params, dt: float, Ao, Bo, Co, Ko, Lo, disturbance: bool) -> Refi
     # quantized, holds (large_signal.py).
     found = []  # per run: (cost, gain scales x, large_signal.guard() of its whole refinement)
     for run in range(RESTARTS):
+        if progress is not None:
+            progress(run + 1, RESTARTS)
         x0 = np.zeros(nK + nL) if run == 0 else NUDGE * np.random.default_rng(run).standard_normal(nK + nL)
         res = minimize(cost, x0, jac=True, method="L-BFGS-B", bounds=[SCALE_BOUNDS] * len(x0),
                        options={"maxiter": MAX_ITER})

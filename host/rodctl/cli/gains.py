@@ -55,16 +55,24 @@ def params_copy_text(p: Params, command: str) -> str:
     )
 
 
+def robust_progress(run: int, most: int) -> None:
+    """One line per L-BFGS run of a robust refinement (design.method = robust): 1 to 3 s each, up to
+    half a minute in all on a new parameter file; a cached design prints nothing."""
+    if run == 1:
+        print(f"rodctl: refining the gains on the robust model family (design.method = robust): up to {most} "
+              "optimizer runs of 1 to 3 s each, stopping once the design most runs reach cannot change",
+              file=sys.stderr, flush=True)
+    end = "\r" if sys.stderr.isatty() else "\n"
+    print(f"  run {run} of at most {most}", end=end, file=sys.stderr, flush=True)
+
+
 def generated_files(args) -> tuple[object, dict[Path, str]]:
     """Design, then the files `rodctl gains` would write: {path: text}."""
     from rodgains.codegen import header_text
     from rodgains.design import design
 
     p = params_from_args(args)
-    if p["design"]["method"] == "robust":  # seconds, not milliseconds: say so before the wait
-        print("rodctl: refining the gains on the robust model family (design.method = robust; a few seconds)",
-              file=sys.stderr, flush=True)
-    d = design(p)
+    d = design(p, progress=robust_progress)
     command = regenerate_command(args)
     header = Path(args.header) if args.header else paths.COMMITTED_HEADER
     files = {header: header_text(d, command), header.with_suffix(".toml"): params_copy_text(p, command)}

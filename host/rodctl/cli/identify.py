@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import math
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -175,10 +176,7 @@ def run_experiment(session, exp, log_path: Path, params, params_source: str, wat
 
 
 def run_port(args) -> int:
-    from rodctl.cli.common import design_params, stop_signals
     from rodctl.ident import experiments as E
-    from rodctl.link import protocol as P
-    from rodctl.link.session import Session, reason_text
 
     if not 0 < args.scale <= 4:
         raise InputError(f"--scale must be in (0, 4], got {args.scale:g}")
@@ -188,6 +186,23 @@ def run_port(args) -> int:
     check_output(args.out, "--out", force=args.force)
     log_dir = make_folder(args.log_dir, f"--log-dir {args.log_dir}")
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    try:
+        return _run_and_fit(args, exps, log_dir, stamp)
+    except KeyboardInterrupt:
+        kept = [f for f in log_dir.glob(f"identify-{stamp}-*.csv") if not f.name.endswith(".events.csv")]
+        if not kept:
+            raise
+        pattern = shlex.quote(str(log_dir / f"identify-{stamp}-")) + "*.csv"
+        print(f"rodctl: interrupted; the motor is off; {len(kept)} experiment log{'s' * (len(kept) > 1)} kept: "
+              f"fit {'them' if len(kept) > 1 else 'it'} with: rodctl identify {pattern}", file=sys.stderr)
+        return 130
+
+
+def _run_and_fit(args, exps, log_dir: Path, stamp: str) -> int:
+    from rodctl.cli.common import design_params, stop_signals
+    from rodctl.link import protocol as P
+    from rodctl.link.session import Session, reason_text
+
     logs = []
     with stop_signals(), Session(args.port) as session:
         params, source = design_params(session, args)
@@ -260,15 +275,26 @@ def fit_logs(args, logs: list[Path], params=None, source: str = "") -> int:
     print(buckling_line(identified))
     choice = _choose_compensation(args, identified)
     out = Path(args.out)
-    out.write_text(R.parameter_file(params, res, digests, compensation=choice))
+    verdict = _verdict(args, R.written_params(params, res, choice))
+    lines = verdict.lines(str(out))
+    out.write_text(R.parameter_file(params, res, digests, compensation=choice, verdict=lines))
     plot = Path(args.plot) if args.plot else out.with_suffix(".png")
     R.figure(res, plot)
     print(f"wrote {out} and {plot}")
-    if res.out_of_range:
-        for name, why in res.out_of_range.items():
-            print(f"rodctl: {name}: {why}; kept nominal in {out}", file=sys.stderr)
-        return 1
-    return 0
+    for name, why in res.out_of_range.items():
+        print(f"rodctl: {name}: {why}; kept nominal in {out}", file=sys.stderr)
+    print("\n".join(lines))  # last, where no one can miss it
+    return 0 if verdict.ready and not res.out_of_range else 1
+
+
+def _verdict(args, written):
+    """The matrix on the identified rig's faithful plant with the design about to be written."""
+    from rodctl.ident.verdict import judge
+
+    cases = "nominal" if args.compensation_cases == "none" else args.compensation_cases
+    print(f"verdict: the written design on the identified rig, gearbox included (matrix case set {cases})",
+          file=sys.stderr, flush=True)
+    return judge(written, cases, jobs=args.jobs)
 
 
 def buckling_line(identified) -> str:
@@ -343,8 +369,10 @@ def register(sub) -> None:
                     "recorded logs. The fit identifies rotor inertia, viscous and Coulomb friction, a "
                     "torque-constant scale, the rod's Young's modulus and damping, the gearbox's backlash and the "
                     "encoder's zero error against the project's C plant, chooses the dry-friction compensation for the identified rig by the robustness "
-                    "matrix, and writes a complete parameter file with 95 % intervals. Exit 2: bad input or "
-                    "data that cannot identify the rig; exit 1: a value outside its physical range (not written).",
+                    "matrix, writes a complete parameter file with 95 % intervals, and ends with a verdict: the written "
+                    "design judged by the matrix on the identified rig (gearbox included), whether the nominal goals "
+                    "are met, and what to try next. Exit 0: READY; exit 1: file written but NOT READY, or a value "
+                    "outside its physical range (kept nominal); exit 2: bad input or data that cannot identify the rig.",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("logs", nargs="*", metavar="LOG", help="recorded logs to fit instead of running experiments")
     add_port_arg(p)
@@ -371,7 +399,8 @@ def register(sub) -> None:
                    help="after the fit, choose lqr.friction_compensation for the identified rig by this case set "
                         "of the robustness matrix (matrix, quick, nominal; 2 to 3 min for matrix on 2 cores, about "
                         "2 min more when none passes every run and the stiffer lqr.q_shaft_angle 400 is tried "
-                        "too), or none to keep the nominal file's (default matrix)")
+                        "too), or none to keep the nominal file's (default matrix); the closing verdict runs the same set on the "
+                        "identified rig with its gearbox (with none: the nominal runs only)")
     p.add_argument("--jobs", type=int, metavar="N", help="worker processes for that choice (default: every core)")
     add_design_args(p)
     p.set_defaults(func=run_identify)

@@ -46,17 +46,25 @@ def _identified_comment(line: str) -> str:
     return f"{value}#{what}   [rodctl identify]"
 
 
-def parameter_file(params, res: FitResult, log_digests: list[tuple[str, str]], compensation=None) -> str:
-    """A complete parameter file: params with the identified values, each commented with its interval,
-    headed by the SHA-256 of every log the values came from. compensation: the friction compensation
-    chosen for the identified rig (rodctl.ident.compensation.Choice), written with what chose it."""
-    values, notes = written_values(res)
-    out = with_values(params, values)
+def written_params(params, res: FitResult, compensation=None):
+    """The parameters parameter_file writes: params with the identified values and the chosen
+    compensation (and shaft weight)."""
+    out = identified_params(params, res)
     if compensation is not None:
         chosen = compensation.params["lqr"]
         out = out.with_overrides(f"lqr.friction_compensation={chosen['friction_compensation']!r}",
                                  f"lqr.q_shaft_angle={chosen['q_shaft_angle']!r}")
-    text = out.to_toml()
+    return out
+
+
+def parameter_file(params, res: FitResult, log_digests: list[tuple[str, str]], compensation=None,
+                   verdict: list[str] = ()) -> str:
+    """A complete parameter file: params with the identified values, each commented with its interval,
+    headed by the SHA-256 of every log the values came from. compensation: the friction compensation
+    chosen for the identified rig (rodctl.ident.compensation.Choice), written with what chose it;
+    verdict: the lines of the verdict on the written design (rodctl.ident.verdict), in the header."""
+    _, notes = written_values(res)
+    text = written_params(params, res, compensation).to_toml()
     # Comments go on the lines of the keys that carry each fitted value (the scale lives in k_t and k_e).
     keys = {fp.name: ([fp.key] if fp.key else ["motor.torque_constant", "motor.back_emf_constant"]) for fp in FIT_PARAMS}
     rewritten = {k for name, ks in keys.items() if name in notes for k in ks}
@@ -87,6 +95,7 @@ def parameter_file(params, res: FitResult, log_digests: list[tuple[str, str]], c
             f"residual {res.rms_counts:.2f} encoder counts RMS.",
             "# Logs (SHA-256):"]
     head += [f"#   {digest}  {name}" for name, digest in log_digests]
+    head += [f"# {line}" for line in verdict]
     return "\n".join(head + [""] + lines) + "\n"
 
 

@@ -56,6 +56,15 @@ def envelope(t: np.ndarray, y: np.ndarray, points: int = ENVELOPE_POINTS) -> tup
     return np.concatenate([tt, t[m:]]), np.concatenate([yy, y[m:]])
 
 
+def break_wraps(t: np.ndarray, y: np.ndarray, jump: float) -> tuple[np.ndarray, np.ndarray]:
+    """(t, y) with a NaN between neighbours more than `jump` apart, so that a wrapped angle (179 deg to
+    -179 deg is 2 deg of motion) is drawn as a gap, not a line across the panel."""
+    cut = np.flatnonzero(np.abs(np.diff(y)) > jump) + 1
+    if not cut.size:
+        return t, y
+    return np.insert(np.asarray(t, float), cut, np.nan), np.insert(np.asarray(y, float), cut, np.nan)
+
+
 def events_of(mode: np.ndarray, th: np.ndarray, t: np.ndarray) -> list[tuple[str, int]]:
     """(name, row) of the events a snapshot is drawn at: start, catch, settle, fault, end (in time order)."""
     n = len(mode)
@@ -126,8 +135,8 @@ def make_figure(meta: dict, data: np.ndarray, snapshots: int = 6, title: str | N
             ax_th.axhline(math.pi + 2 * math.pi * k, color="0.6", ls="--", lw=0.6)
     ax_th.set_ylabel("angle estimate [rad]")
     ax_th.set_title("angle estimates (dashed: upright, pi + 2 pi k)", fontsize=9)
-    if n <= 10:
-        ax_th.legend(fontsize=7, ncol=min(n, 5), loc="best")
+    if n <= 10:  # beside the panel: inside, it covers the curves it names
+        ax_th.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.005, 1.0), borderaxespad=0.0)
 
     ax_tq.plot(*envelope(t, np.asarray(tl["torque_Nm"], float)), lw=0.8, color="C3")
     ax_tq.set_ylabel("torque [N m]")
@@ -166,13 +175,13 @@ def make_figure(meta: dict, data: np.ndarray, snapshots: int = 6, title: str | N
 
     dev = np.degrees(from_upright(th))
     for i in range(n):
-        ax_f6.plot(*envelope(t, dev[:, i]), lw=0.8, label=f"edge {i + 1}")
+        ax_f6.plot(*break_wraps(*envelope(t, dev[:, i]), jump=180.0), lw=0.8, label=f"edge {i + 1}")
     ax_f6.axhline(0.0, color="0.6", ls="--", lw=0.6)
     ax_f6.set_ylim(-185, 185)
     ax_f6.set_yticks(range(-180, 181, 45))
     ax_f6.set_ylabel("edge angle from upright [deg]")
     ax_f6.set_xlabel("device time [s]")
-    ax_f6.set_title("edge angles from the nearest upright (Fig. 6; 0 upright, +-180 hanging)", fontsize=9)
+    ax_f6.set_title("edge angles from upright (Fig. 6; +-180 hanging)", fontsize=9)
     ax_f6.grid(True, lw=0.3)
 
     fig.suptitle(title or title_of(meta, len(tl)), fontsize=10)

@@ -33,15 +33,32 @@ def _verdict(row: dict) -> tuple[str, str]:
     return ("pass", "#2e7d32") if row.get("passed") else ("FAIL", "#c62828")
 
 
+HEAT_SPAN = (0.15, 0.85)  # the part of the colour map a cell uses: its ends are too light or dark for text
+
+
 def heatmap(rows: list[dict], path: Path, title: str) -> Path:
+    """heatmap_figure, written to `path` (PNG, or the format of its extension)."""
+    import matplotlib.pyplot as plt
+
+    fig = heatmap_figure(rows, title)
+    path = Path(path)
+    with replacing(path) as tmp:
+        fig.savefig(tmp, dpi=130, format=path.suffix.lstrip(".") or "png")
+    plt.close(fig)
+    return path
+
+
+def heatmap_figure(rows: list[dict], title: str):
     """One panel per task: a row per case (and Monte Carlo draw), a column per metric. Each column is
-    coloured on its own scale (lighter = smaller = better for every metric here); the first column
-    says pass / FAIL / refused; empty cells are runs where the metric does not exist (never settled,
-    not a swing-up)."""
+    coloured on its own scale (lighter = smaller = better for every metric here), as the colour key
+    under the panels says; the first column says pass / FAIL / refused; empty cells are runs where the
+    metric does not exist (never settled, not a swing-up)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import ListedColormap, Normalize
 
     from rodctl.sim.matrix import buckled
 
@@ -63,7 +80,7 @@ def heatmap(rows: list[dict], path: Path, title: str) -> Path:
             for i in range(M.shape[0]):
                 if fin[i]:
                     f = 0.5 if hi == lo else (col[i] - lo) / (hi - lo)
-                    ax.add_patch(plt.Rectangle((j + 1, i), 1, 1, color=cmap(0.15 + 0.7 * f)))
+                    ax.add_patch(plt.Rectangle((j + 1, i), 1, 1, color=cmap(HEAT_SPAN[0] + (HEAT_SPAN[1] - HEAT_SPAN[0]) * f)))
                     ax.text(j + 1.5, i + 0.5, f"{col[i]:.{cols[j][2]}f}", ha="center", va="center", fontsize=6.5,
                             color="white" if f > 0.45 else "black")
                 else:
@@ -85,12 +102,13 @@ def heatmap(rows: list[dict], path: Path, title: str) -> Path:
         ax.set_title(f"{task}: {n_pass}/{len(sub)} pass", fontsize=9)
         for s in ax.spines.values():
             s.set_visible(False)
+    key = ListedColormap(cmap(np.linspace(*HEAT_SPAN, 256)))
+    bar = fig.colorbar(ScalarMappable(Normalize(0.0, 1.0), key), ax=axes[0].tolist(), orientation="horizontal",
+                       shrink=0.6, aspect=50, pad=0.01)
+    bar.set_ticks([0.0, 1.0], labels=["smallest in its column: better", "largest in its column: worse"], fontsize=7)
+    bar.set_label("cell colour: each metric on its own scale (grey: no value)", fontsize=7)
     fig.suptitle(title, fontsize=10)
-    path = Path(path)
-    with replacing(path) as tmp:
-        fig.savefig(tmp, dpi=130, format=path.suffix.lstrip(".") or "png")
-    plt.close(fig)
-    return path
+    return fig
 
 
 def frontier_figure(rows: list[dict], x: str, y: str | None, path: Path, title: str, *, color_key: str = "settle_s",

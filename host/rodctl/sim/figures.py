@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import math
+import textwrap
 
 import numpy as np
 
 from rodctl.logs.plots import shape_nodes
 from rodctl.logs.metadata import overrides_of
 from rodctl.sim.scenarios import SETTLE_DEG, Outcome, Trace, resample_edges
+
+TITLE_CHARS_PER_INCH = 13  # characters of a 10-point title that fit an inch of figure, with margin
 
 COLORS = ["#1f77b4", "#d62728", "#e6a800", "#2ca02c", "#9467bd", "#8c564b"]
 
@@ -33,11 +36,15 @@ def make_figure(o: Outcome, snapshots: int = 6):
 
     firmware = [tr for tr in o.traces if tr.est is not None]
     rows = 3 + (1 if firmware else 0)
-    fig = Figure(figsize=(12, 2.4 + 2.2 * (rows - 1)), layout="constrained")
+    width = 12  # [in]
+    fig = Figure(figsize=(width, 2.4 + 2.2 * (rows - 1)), layout="constrained")
     gs = fig.add_gridspec(rows, snapshots, height_ratios=[1.3] + [1] * (rows - 1))
     over = " ".join(overrides_of(o.params))
-    fig.suptitle(f"{o.name}: {o.title}\n{'PASS' if o.passed else 'FAIL'}: {o.criterion}"
-                 + (f"\noverrides: {over}" if over else ""), fontsize=10)
+    lines = [f"{o.name}: {o.title}", f"{'PASS' if o.passed else 'FAIL'}: {o.criterion}"]
+    if over:
+        lines.append(f"overrides: {over}")
+    # wrapped to the figure's width: a long override list was cut off at both sides
+    fig.suptitle("\n".join(textwrap.fill(ln, TITLE_CHARS_PER_INCH * width) for ln in lines), fontsize=10)
 
     def lengths(tr):  # edge lengths [m]: a faithful plant's hub differs from its other edges
         return np.diff(tr.node_arc) if tr.node_arc is not None else tr.edge_length
@@ -94,11 +101,13 @@ def make_figure(o: Outcome, snapshots: int = 6):
         for i in range(n):
             ax_e.plot(tr.t, err[:, i], lw=0.8, label=f"edge {i + 1}")
         ax_e.set_ylabel("estimate - true [deg]")
-        ax_e.legend(fontsize=6, ncol=min(n, 10), loc="upper right")
+        # above the panel: inside, it covered the error right after the catch
+        ax_e.legend(fontsize=6, ncol=min(n, 10), loc="lower right", bbox_to_anchor=(1.0, 1.0), borderaxespad=0.2,
+                    frameon=False)
         ax_e.set_xlabel("time [s]")
         finite = err[np.isfinite(err)]
-        if finite.size:
-            span = max(1.0, float(np.percentile(np.abs(finite), 99.5)) * 1.2)
+        if finite.size:  # the whole error, its trough right after the catch included
+            span = max(1.0, float(np.max(np.abs(finite))) * 1.1)
             ax_e.set_ylim(-span, span)
     else:
         ax_u.set_xlabel("time [s]")
