@@ -69,7 +69,7 @@ class FakeBoard:
         self._write(P.encode(msg, self._next_seq(), int(time.monotonic() * 1e6) & 0xFFFFFFFF))
 
     def _hello(self):
-        return P.Hello(fw_major=0, fw_minor=1, fw_patch=0, gains_schema=1, n=2, mode=self.mode, reason=0,
+        return P.Hello(fw_major=0, fw_minor=1, fw_patch=0, gains_schema=1, n=2, mode=self.mode, reason=0, rig=0,
                        period_us=1000, decimation=10, swing_amplitude=0.05, swing_angle=0.5, catch_angle=0.5,
                        heartbeat_timeout=0.5, torque_max=0.2, header_sha256=bytes(32))
 

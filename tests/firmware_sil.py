@@ -79,6 +79,12 @@ class Sil:
     def arm(self, mode: int) -> int:
         return self.lib.rod_sil_arm_result(mode)
 
+    def past_runaway_watch(self, count: int = 0) -> None:
+        """A second at rest at `count`: the runaway watch (rod_runaway.h) of the mode just armed ends.
+        For tests that then impose a motion no torque made (a real base would answer the torque)."""
+        for _ in range(int(round(1.05 / self.p.dt))):
+            self.step(count)
+
     def status(self) -> tuple[int, list[float], list[float]]:
         buf = (C.c_float * (2 * self.n))()
         mode = self.lib.rod_sil_status(buf, 2 * self.n)

@@ -58,7 +58,8 @@ def ref_cobs(data: bytes) -> bytes:
 
 
 TYPES = {"TELEMETRY": 0x01, "HELLO": 0x02, "ACK": 0x03, "HEARTBEAT": 0x10, "ARM": 0x11, "DISARM": 0x12,
-         "CLEAR_FAULT": 0x13, "SET": 0x14, "HELLO_REQUEST": 0x15, "IDENTIFY": 0x16}
+         "CLEAR_FAULT": 0x13, "SET": 0x14, "HELLO_REQUEST": 0x15, "IDENTIFY": 0x16,
+         "SAVE_RIG": 0x17}
 
 
 def ref_payload(name: str, f: dict) -> bytes:
@@ -70,7 +71,7 @@ def ref_payload(name: str, f: dict) -> bytes:
                 + struct.pack(f"<{n}f", *f["theta_hat"]) + struct.pack(f"<{n}f", *f["rate_hat"]))
     if name == "HELLO":
         return struct.pack("<BBBBBBBBIHHfffff32s", f["fw_major"], f["fw_minor"], f["fw_patch"], f["gains_schema"],
-                           f["n"], f["mode"], f["reason"], 0, f["period_us"], f["decimation"], 0,
+                           f["n"], f["mode"], f["reason"], f["rig"], f["period_us"], f["decimation"], 0,
                            f["swing_amplitude"], f["swing_angle"], f["catch_angle"], f["heartbeat_timeout"],
                            f["torque_max"], bytes.fromhex(f["header_sha256"]))
     if name == "ACK":
@@ -156,10 +157,11 @@ def cases() -> list[dict]:
         if "ff_block" in c["case"]:
             assert 0xFF in cobs_codes(bytes.fromhex(c["wire"])[:-1]), c["case"]
     add("hello", "HELLO", 0, 1500, {
-        "fw_major": 1, "fw_minor": 2, "fw_patch": 3, "gains_schema": 1, "n": 5, "mode": 0, "reason": 0,
+        "fw_major": 1, "fw_minor": 2, "fw_patch": 3, "gains_schema": 1, "n": 5, "mode": 0, "reason": 0, "rig": 0x05,
         "period_us": 1000, "decimation": 10, "swing_amplitude": f32(0.01), "swing_angle": f32(0.5235988),
         "catch_angle": f32(0.5235988), "heartbeat_timeout": f32(0.5), "torque_max": f32(0.2),
-        "header_sha256": "bf696209351be89d53b64b5f4cabfdd2f0bb0dd5d367d8ae87a4c93c984f5843"}, "power-on hello")
+        "header_sha256": "bf696209351be89d53b64b5f4cabfdd2f0bb0dd5d367d8ae87a4c93c984f5843"},
+        "power-on hello; rig 0x05: encoder reversed, stored")
     add("ack_ok", "ACK", 1001, 123457000, {"command": 0x11, "result": 0, "command_seq": 42, "mode": 4},
         "arm balance accepted, now CATCH")
     add("ack_bad_state", "ACK", 1002, 123458000, {"command": 0x11, "result": 2, "command_seq": 0xFFFFFFFF, "mode": 3},
@@ -171,8 +173,10 @@ def cases() -> list[dict]:
     add("disarm", "DISARM", 46, 1000300, {}, "")
     add("clear_fault", "CLEAR_FAULT", 47, 1000400, {}, "")
     add("hello_request", "HELLO_REQUEST", 0, 0, {}, "all-zero header fields")
+    add("save_rig", "SAVE_RIG", 61, 1000700, {}, "store the signs on the board")
     for param, value, label in [(1, 0.015, "swing_amplitude"), (2, 0.6, "swing_angle"), (3, 0.35, "catch_angle"),
-                                (4, 10.0, "telemetry_decimation"), (5, 0.25, "heartbeat_timeout")]:
+                                (4, 10.0, "telemetry_decimation"), (5, 0.25, "heartbeat_timeout"),
+                                (6, -1.0, "encoder_sign"), (7, -1.0, "motor_sign")]:
         add(f"set_{label}", "SET", 48 + param, 1000500 + param, {"param": param, "value": f32(value)}, f"SET {label}")
     add("set_negative", "SET", 60, 0xFFFFFFFF, {"param": 1, "value": f32(-1e-3)}, "negative value (device says BAD_VALUE)")
     for exc, label, amp, dur, s1, s2, seed in [(1, "chirp", 0.02, 8.0, 0.5, 6.0, 0),

@@ -32,7 +32,7 @@ def test_design_exports_python_control_models():
     assert rho == np.float64(rho) and abs(rho - d.checks["closed_loop_spectral_radius"]) < 1e-9
     assert cl.output_labels == ["theta_1", "torque_Nm"]
     # a held disturbance torque is rejected: theta_1 settles, the command cancels it (the disturbance
-    # estimate is slow by design, a loop mode near -0.46 rad/s: README "Balance weights")
+    # estimate is slow by design, a loop mode near -0.46 rad/s: docs/scenarios.md, "Balance weights")
     r = control.step_response(cl, T=np.arange(0, 20, d.dt))
     assert abs(r.outputs[1, 0, -1] + 1.0) < 0.05 and abs(r.outputs[0, 0, -1]) < 0.05
 

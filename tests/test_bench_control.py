@@ -28,7 +28,7 @@ def test_control_goals_are_reported_with_verdicts_and_a_miss_exits_1(monkeypatch
     rows = [{"passed": True, "case": "x", "final_dev_deg": 1.0}] * 70 + \
         [{"passed": False, "case": "backlash3", "final_dev_deg": 4.2}] * 2
     monkeypatch.setattr(M, "run_matrix", lambda p, **kw: rows)
-    monkeypatch.setattr(M, "longest_balanced", lambda p, designs=((),): {"ratio": 1.10})
+    monkeypatch.setattr(M, "longest_balanced", lambda p, designs=((),), band_deg=1.0: {"ratio": 1.10})
     out = tmp_path / "bench.json"
     assert main(["bench", "--only", "control", "--json", str(out)]) == 1  # goals missed
     got = json.loads(out.read_text())

@@ -31,7 +31,7 @@ def cache(tmp_path, monkeypatch):
     calls = []
     rng = np.random.default_rng(7)
 
-    def fake_refine(p, dt, Ao, Bo, Co, Ko, Lo, disturbance):
+    def fake_refine(p, dt, Ao, Bo, Co, Ko, Lo, disturbance, progress=None):
         calls.append(p.sha256())
         n = Ko.shape[1] - 1
         scale = 1.0 + 0.01 * rng.standard_normal(n)  # full float64 mantissas, as a real refinement gives

@@ -48,7 +48,7 @@ def test_kick_uses_a_new_amplitude(sil):
 def test_swing_up_pumps_with_the_sign_of_the_rate_inside_the_swing_angle(sil):
     amplitude = sil.p["swing_up"]["amplitude"]
     sil.arm(2)
-    sil.step(0)
+    sil.past_runaway_watch(20)
     # swinging through the bottom in the - direction, 1 count per step (~6 rad/s)
     u = 0.0
     for k in range(1, 30):

@@ -56,6 +56,7 @@ def test_duty_is_limited_and_the_torque_reported_is_what_the_supply_gives(sil):
     kt, ke, R, V, tmax = motor(sil)
     assert sil.set("SWING_AMPLITUDE", tmax) == ACK["OK"]
     sil.arm(2)
+    sil.past_runaway_watch()
     limit = sil.p["safety"]["speed_limit"]
     amp = 0.45
     omega = 0.93 * limit / amp

@@ -79,6 +79,7 @@ def test_speed_below_the_limit_does_not_trip():
     sil = Sil()
     limit = sil.p["safety"]["speed_limit"]
     sil.arm(2)
+    sil.past_runaway_watch()
     amplitude = 0.6  # rad, inside the swing region, far from the catch angle
     omega = 0.75 * limit / amplitude
     peak = 0.0

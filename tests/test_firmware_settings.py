@@ -66,7 +66,7 @@ def test_set_bounds(param):
 def test_unknown_param_is_refused():
     sil = Sil()
     assert sil.lib.rod_sil_set(0, 1.0) == ACK["BAD_VALUE"]
-    assert sil.lib.rod_sil_set(6, 1.0) == ACK["BAD_VALUE"]
+    assert sil.lib.rod_sil_set(max(int(v) for v in P.Param) + 1, 1.0) == ACK["BAD_VALUE"]
 
 
 def test_catch_angle_setting_moves_the_catch():

@@ -272,7 +272,7 @@ def test_report_lists_critical_lengths_margins_and_the_sampled_paper_gain():
 
 def test_report_points_a_rod_past_the_critical_length_to_the_soft_shaft():
     """The stiff shaft clamps the rod's foot: past 1.05 x the critical length the report says so (the default
-    design holds 1.05 from 10 deg, not 1.06; README, longest rod). Table I's rod (1.006 x) gets no note."""
+    design holds 1.05 from 10 deg, not 1.06; docs/scenarios.md, longest rod). Table I's rod (1.006 x) gets no note."""
     long_rod = rodctl("gains", "--report", "--set", "rod.length=0.165")  # 1.071 x the continuum's 15.40 cm
     assert long_rod.returncode == 0, long_rod.stderr
     note = [x for x in long_rod.stdout.splitlines() if "NOTE: lqr.q_shaft_angle = 325" in x]

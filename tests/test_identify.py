@@ -241,7 +241,8 @@ def test_a_swing_past_the_soft_limit_is_stopped_and_played_again_smaller(tmp_pat
     r = run_rodctl("identify", "--port", "sim://", "--experiment", "chirp", "--experiment", "steps",
                    "--scale", "1.25", "--settle", "2", "--yes", "--log-dir", str(tmp_path / "logs"), "--out", str(out),
                    "--starts", "1", "--compensation-cases", "none", timeout=400)
-    assert r.returncode == 0, r.stderr
+    # the file is written; the default rig misses the nominal goals on its gearbox (docs/control.md): exit 1
+    assert r.returncode == 1 and "verdict: NOT READY" in r.stderr + r.stdout, r.stderr
     stopped = [ln for ln in r.stderr.splitlines() if ln.strip().startswith("stopped:")]
     assert len(stopped) == 1 and "(soft limit 48 deg)" in stopped[0] and "-steps.csv" in stopped[0]
     assert int(stopped[0].split("swung ")[1].split(" deg")[0]) >= 48
@@ -289,7 +290,7 @@ def _identified(name: str, tmp_path):
 
 def test_the_design_for_the_identified_rig_passes_on_the_hidden_plant(tmp_path):
     """Issue 10: design from the identified file, judge it on the hidden rig (`rodctl robustness --plant`),
-    here on the quick case set (README: the whole matrix on rigs A, B, C)."""
+    here on the quick case set (docs/identification.md: the whole matrix on rigs A, B, C)."""
     from rodctl.sim.matrix import CASE_SETS, CASES, IDEAL_GEARBOX, TASKS, run_case
 
     # judged with an ideal gearbox: what the identified rod and motor change, without the play's hunting

@@ -161,7 +161,7 @@ def test_no_dry_friction_leaves_nothing_to_choose():
     assert C.choose(load_params(None, ["motor.coulomb_friction=0.0"]), cases="nominal", jobs=1, progress=False) is None
 
 
-# Random rig s4_1 of the README's "Friction compensation, chosen on the identified rig" (J x0.80, b x1.22,
+# Random rig s4_1 of docs/identification.md (J x0.80, b x1.22,
 # T_c x1.03, k_t x1.09, E x1.04, d x1.24), on which no compensation holds a rod ten times more damped at the
 # default shaft weight.
 RIG_S4_1 = ("motor.rotor_inertia=4.0236e-07", "motor.viscous_friction=6.1149e-04", "motor.coulomb_friction=5.1318e-03",

@@ -43,7 +43,7 @@ class Telemetry(C.Structure):
 class Hello(C.Structure):
     _fields_ = [("fw_major", C.c_uint8), ("fw_minor", C.c_uint8), ("fw_patch", C.c_uint8),
                 ("gains_schema", C.c_uint8), ("n", C.c_uint8), ("mode", C.c_uint8), ("reason", C.c_uint8),
-                ("period_us", C.c_uint32), ("decimation", C.c_uint16), ("swing_amplitude", C.c_float),
+                ("rig", C.c_uint8), ("period_us", C.c_uint32), ("decimation", C.c_uint16), ("swing_amplitude", C.c_float),
                 ("swing_angle", C.c_float), ("catch_angle", C.c_float), ("heartbeat_timeout", C.c_float),
                 ("torque_max", C.c_float), ("header_sha256", C.c_uint8 * 32)]
 

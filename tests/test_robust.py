@@ -292,7 +292,7 @@ def test_robustness_writes_json_and_heatmap(tmp_path, capsys):
 def test_sweep_refused_design_is_a_row_and_parquet_has_one_row_per_run(tmp_path, capsys):
     pq = pytest.importorskip("pyarrow.parquet")
     out = tmp_path / "s.parquet"
-    # design.method = continuous on the paper's model is refused by the generator (README)
+    # design.method = continuous on the paper's model is refused by the generator (docs/scenarios.md)
     assert main(["sweep", "--grid", "design.method=sampled,continuous", "--set", "motor.design_includes_motor=false",
                  "--seconds", str(SECONDS), "--jobs", "2", "--out", str(out)]) == 0
     rows = pq.read_table(out).to_pylist()

@@ -368,7 +368,7 @@ def test_noise_torque_limit_removes_the_buzz():
     torque drops from 23 to at most 15 mN m, the 61 Hz ring is damped past the report's 0.1 warning
     (measured 0.137, from 0.054), and the firmware's balanced torque ripple on the faithful plant
     falls (measured 41 against 58 mN m RMS: the linear bound does not see all of it). (Whether damping x10 still
-    holds is a knife edge, README "Robust design"; so it is not asserted.)"""
+    holds is a knife edge, docs/design.md; so it is not asserted.)"""
     from rodgains.report import least_damped_mode, quantization_torque, report_text
 
     loud = design(load_params(MATRIX_FILE))

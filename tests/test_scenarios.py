@@ -87,7 +87,7 @@ def test_balance_from_30_deg_with_quantization_and_torque_limit(outcomes):
     ripple = np.sqrt(np.mean(tr.torque_cmd[tr.t > 4.0] ** 2))
     # once balanced the torque dithers by the +-7.4 mN m friction feed-forward and about one encoder
     # count (47 mN m with the stiff shaft): 36 mN m RMS measured, not a limit cycle growing toward the
-    # 0.2 N m limit (README "A stiffer shaft": docs/tuned/low-ripple.toml's weights give 18)
+    # 0.2 N m limit (docs/design.md, "A stiffer shaft": docs/tuned/low-ripple.toml's weights give 18)
     assert ripple < 0.05
 
 

@@ -61,11 +61,13 @@ def _red_rod(img: np.ndarray):
     return np.nonzero(red)
 
 
-def test_scope_draws_a_balanced_rod_upright_in_a_real_window(xdisplay):
-    from PIL import ImageGrab
+def test_scope_draws_a_balanced_rod_upright_in_a_real_window(xdisplay, tmp_path):
+    from PIL import Image, ImageGrab
 
     # The virtual board's rod starts at rest upright (theta0_deg=180) and the scope arms balance at once.
-    proc = _start_scope(xdisplay, "--port", "sim://?theta0_deg=180", "--arm", "balance", "--duration", "60")
+    shot = tmp_path / "scope.png"  # how docs/img/scope.png is made (docs/tutorials/logging.md)
+    proc = _start_scope(xdisplay, "--port", "sim://?theta0_deg=180", "--arm", "balance", "--duration", "60",
+                        "--screenshot", str(shot))
     try:
         _wait_for_window(proc)
         time.sleep(4.0)  # a few seconds of balance, drawn every 100 ms
@@ -85,6 +87,10 @@ def test_scope_draws_a_balanced_rod_upright_in_a_real_window(xdisplay):
     assert near_bottom > 10 and near_top == 0, (near_bottom, near_top)
     assert proc.returncode == 0, err
     assert "Traceback" not in err and "scope ended: disarmed" in err
+    # the screenshot shows the same upright rod
+    rows, cols = _red_rod(np.asarray(Image.open(shot).convert("RGB")).astype(int))
+    assert rows.size > 100 and rows.max() - rows.min() > 5 * (cols.max() - cols.min())
+    assert f"screenshot {shot}" in err
 
 
 def test_ctrl_c_disarms_and_closes_without_a_traceback(xdisplay):

@@ -23,6 +23,9 @@ def f32(x: float) -> float:
 def test_every_setting_has_a_range():
     for c in P.SPEC.codes["param"].values:
         assert c.min is not None and (c.max is not None or c.design_max), c.name
+        if c.name in ("ENCODER_SIGN", "MOTOR_SIGN"):  # +1 or -1 and nothing between (the firmware refuses 0)
+            assert (c.min, c.max, c.integer) == (-1, 1, True), c.name
+            continue
         assert c.min > 0 or c.name == "TELEMETRY_DECIMATION" and c.min >= 1, c.name  # nothing down to denormals
 
 

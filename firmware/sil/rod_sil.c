@@ -207,6 +207,21 @@ int rod_dev_status(float *est, int cap)
     return status_of(&vdev, est, cap);
 }
 
+void rod_dev_load_rig(const uint8_t *stored, size_t n)
+{
+    rod_device_load_rig(&vdev, stored, n, (rod_rig_t){1, 1});
+}
+
+size_t rod_dev_take_save(uint8_t *out, size_t cap)
+{
+    uint8_t bytes[ROD_RIG_STORE_SIZE];
+    if (cap < ROD_RIG_STORE_SIZE || !rod_device_take_save(&vdev, bytes)) {
+        return 0;
+    }
+    memcpy(out, bytes, ROD_RIG_STORE_SIZE);
+    return ROD_RIG_STORE_SIZE;
+}
+
 size_t rod_dev_write(const uint8_t *data, size_t n)
 {
     size_t room = SIL_RX_CAPACITY - rx_len;

@@ -9,7 +9,7 @@
  *   0 DISARMED  1 BALANCE  2 SWING_UP  3 FAULT  4 CATCH  5 IDENTIFY
  * Reason codes (rod_sil_reason, rod_dev_reason):
  *   0 NONE  1 HOST  2 ANGLE_LIMIT  3 SPEED_LIMIT  4 DRIVER_FAULT  5 HEARTBEAT  6 NON_FINITE
- *   7 OVERRUN
+ *   7 OVERRUN  8 NO_TIMER  9 RUNAWAY  (the protocol's codes, firmware/protocol/rodlink.toml)
  * Angles in rad with 0 hanging and pi upright (multi-turn), rates in rad/s, torque in N m at
  * the output shaft, duty signed in [-1, 1].
  */
@@ -81,6 +81,12 @@ ROD_SIL_API float rod_dev_duty(void);
 ROD_SIL_API int rod_dev_enable(void);
 ROD_SIL_API int rod_dev_reason(void);
 ROD_SIL_API int rod_dev_status(float *est, int cap);
+/* After rod_dev_reset, before the first step: the rig signs the board kept (8 bytes, rod_rig.h;
+ * NULL / 0: none, the defaults +1 +1 apply), as the board reads them from its EEPROM at power-on. */
+ROD_SIL_API void rod_dev_load_rig(const uint8_t *stored, size_t n);
+/* After a SAVE_RIG: copies the 8 bytes the board would write to its EEPROM and returns 8, once;
+ * otherwise 0. */
+ROD_SIL_API size_t rod_dev_take_save(uint8_t *out, size_t cap);
 /* Host -> device bytes; returns how many the emulated USB RX buffer (4096 bytes) took. */
 ROD_SIL_API size_t rod_dev_write(const uint8_t *data, size_t n);
 /* Device -> host bytes (COBS frames, each ended by 0x00), oldest first; returns how many were

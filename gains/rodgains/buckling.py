@@ -58,7 +58,7 @@ def clamped_ratio(p: Params) -> float:
     The plant's hub (plant.hub_length) sits rigid in the shaft, so what can buckle is the rod above
     it, clamped at the hub. Past 1 that rod buckles under its own weight whenever the shaft holds
     still, and the only way to keep it straight is to move the shaft under it, which the encoder
-    sees only after the rod has bent (README "System identification": three stiff-shaft designs held
+    sees only after the rod has bent (docs/identification.md: three stiff-shaft designs held
     no run from 1.007 on)."""
     lc = greenhill_length(p)
     return (p["rod"]["length"] - p["plant"]["hub_length"]) / lc if math.isfinite(lc) else 0.0

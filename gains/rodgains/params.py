@@ -32,18 +32,34 @@ class Key:
     default: Any = None  # not None: the key may be left out of a file (added after files were written)
 
 
+# Every check carries `text`, the allowed values in words, for the generated parameter reference.
 def _positive(v):
     return None if v > 0 else "must be > 0"
+
+
+_positive.text = "> 0"
 
 
 def _nonneg(v):
     return None if v >= 0 else "must be >= 0"
 
 
+_nonneg.text = ">= 0"
+
+
 def _between(lo, hi):
     def check(v):
         return None if lo <= v <= hi else f"must be between {lo:g} and {hi:g}"
 
+    check.text = f"{lo:g} to {hi:g}"
+    return check
+
+
+def _above_upto(lo, hi):
+    def check(v):
+        return None if lo < v <= hi else f"must be in ({lo:g}, {hi:g}]"
+
+    check.text = f"({lo:g}, {hi:g}]"
     return check
 
 
@@ -51,7 +67,15 @@ def _choice(*options):
     def check(v):
         return None if v in options else "must be one of " + ", ".join(repr(o) for o in options)
 
+    check.text = "one of " + ", ".join(f'"{o}"' for o in options)
     return check
+
+
+def allowed_text(key: "Key") -> str:
+    """The values a key accepts, in words ("" for any value of its kind)."""
+    if key.kind is bool:
+        return "true or false"
+    return getattr(key.check, "text", "") if key.check is not None else ""
 
 
 PLANT_MODELS = ("der", "inextensible")
@@ -76,7 +100,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "gear_ratio": Key(float, "-", _positive),
         "torque_constant": Key(float, "N m/A", _positive),
         "back_emf_constant": Key(float, "V s/rad", _nonneg),
-        "gearbox_efficiency": Key(float, "-", lambda v: None if 0 < v <= 1 else "must be in (0, 1]"),
+        "gearbox_efficiency": Key(float, "-", _above_upto(0, 1)),
         "resistance": Key(float, "ohm", _positive),
         "rotor_inertia": Key(float, "kg m^2", _nonneg),
         "viscous_friction": Key(float, "N m s/rad", _nonneg),
@@ -104,7 +128,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "driver": {
         "supply_voltage": Key(float, "V", _between(4.5, 36.0)),
         "current_limit": Key(float, "A", _positive),
-        "max_duty": Key(float, "-", lambda v: None if 0 < v <= 1 else "must be in (0, 1]"),
+        "max_duty": Key(float, "-", _above_upto(0, 1)),
         "pwm_frequency_hz": Key(float, "Hz", _between(20000, 100000)),
     },
     "encoder": {
@@ -132,7 +156,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "lqr": {
         "q_angle": Key(float, "1/rad^2", _nonneg),
         "q_rate": Key(float, "s^2/rad^2", _nonneg),
-        # added to q_angle on the shaft's own angle theta_1: a stiffer base (README "A stiffer shaft")
+        # added to q_angle on the shaft's own angle theta_1: a stiffer base (docs/design.md, "A stiffer shaft")
         "q_shaft_angle": Key(float, "1/rad^2", _nonneg, default=0.0),
         "r_torque": Key(float, "1/(N m)^2", _positive),
         "friction_compensation": Key(float, "N m", _nonneg),
@@ -155,14 +179,14 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
     "swing_up": {
         "amplitude": Key(float, "N m", _nonneg),  # range: check_firmware_limits
-        "angle_deg": Key(float, "deg", lambda v: None if 0 < v <= 180 else "must be in (0, 180]"),
-        "catch_angle_deg": Key(float, "deg", lambda v: None if 0 < v <= 90 else "must be in (0, 90]"),
+        "angle_deg": Key(float, "deg", _above_upto(0, 180)),
+        "catch_angle_deg": Key(float, "deg", _above_upto(0, 90)),
         "energy_target": Key(float, "-", _between(0.5, 2.0)),
         "rate_filter_hz": Key(float, "Hz", _positive),
     },
     "safety": {
         "torque_limit": Key(float, "N m", _positive),
-        "angle_limit_deg": Key(float, "deg", lambda v: None if 0 < v <= 180 else "must be in (0, 180]"),
+        "angle_limit_deg": Key(float, "deg", _above_upto(0, 180)),
         "speed_limit": Key(float, "rad/s", _positive),
         "heartbeat_timeout": Key(float, "s", _between(0.05, 10.0)),
     },
@@ -185,7 +209,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
 }
 # The previous default's soft shaft (docs/tuned/low-ripple.toml) as overrides of the stiff default: past
-# ~1.05 x its critical length a rod holds only without the shaft weight (README, longest rod).
+# ~1.05 x its critical length a rod holds only without the shaft weight (docs/scenarios.md, longest rod).
 SOFT_SHAFT_WEIGHTS = ("lqr.q_angle=4.86", "lqr.q_shaft_angle=0.0")
 
 

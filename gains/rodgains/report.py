@@ -82,7 +82,7 @@ def quantization_torque(d: Design) -> float:
                             d.params.rad_per_count)
 
 
-# Measured (README "Longest rod"): with lqr.q_shaft_angle > 0 the base clamps the rod's foot, and the
+# Measured (docs/scenarios.md, "Longest rod"): with lqr.q_shaft_angle > 0 the base clamps the rod's foot, and the
 # default design and its observer variants hold 1.05 x the critical length from 10 deg but not 1.06;
 # the soft-shaft weights (the previous default's, docs/tuned/low-ripple.toml) reach 1.08 to 1.10.
 STIFF_SHAFT_MAX_RATIO = 1.05
@@ -93,7 +93,7 @@ def _stiff_shaft_note(p, ratio: float) -> list[str]:
         return []
     return [f"  NOTE: lqr.q_shaft_angle = {p['lqr']['q_shaft_angle']:g} clamps the rod's foot, and a clamped rod "
             f"past {STIFF_SHAFT_MAX_RATIO:g} x its critical length buckles: try the soft shaft of "
-            f"docs/tuned/low-ripple.toml ({', '.join(SOFT_SHAFT_WEIGHTS)}; README, longest rod)"]
+            f"docs/tuned/low-ripple.toml ({', '.join(SOFT_SHAFT_WEIGHTS)}; docs/scenarios.md, longest rod)"]
 
 
 def _clamped_line(p) -> str:

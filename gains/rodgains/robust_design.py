@@ -2,7 +2,7 @@
 
 Why: the LQG design trusts one model, and a silicone rod's damping is known to a factor of ten at
 best. With the observer's lightly damped bending mode against a rod ten times more damped, the
-3.4 Hz loop mode turns unstable (README, "Where the paper's design fails"), and no choice of the
+3.4 Hz loop mode turns unstable (docs/scenarios.md), and no choice of the
 LQG weights holds damping x0.1 and x10 at once. The gains here are still the firmware's K and L
 (same header, same loop); only their numbers change.
 
@@ -11,7 +11,7 @@ L-BFGS on a smooth penalty, so that every model of a family stays below `design.
 (spectral radius of the sampled loop with the firmware's estimator; a penalty, so a member may end
 up to about 1e-4 above it), while the slowest mode of the nominal models is made as fast as that
 allows, and (design.robust_nominal_decay > 0) every nominal mode slower than that rate is penalized:
-two lightly damped loop modes, not only the slowest, kept the nominal rod ringing for 2 s (README);
+two lightly damped loop modes, not only the slowest, kept the nominal rod ringing for 2 s (docs/scenarios.md);
 and (design.robust_noise_torque > 0) the RMS torque encoder quantization drives through the nominal
 models' loop is held below that bound (noise_torque_gradient: the unbounded refinement buys its
 robustness with a 61 Hz mode that buzzes). The family is the designer's own paper model, never

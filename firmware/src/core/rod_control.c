@@ -4,6 +4,7 @@
 #include <math.h>
 
 #include "rod_motor.h"
+#include "rod_runaway.h"
 #include "rod_swingup.h"
 
 static uint32_t seconds_to_us(float s)
@@ -22,6 +23,7 @@ void rod_control_init(rod_control_t *c)
     c->settings.heartbeat_timeout = ROD_HEARTBEAT_TIMEOUT_S;
     c->settings.heartbeat_timeout_us = seconds_to_us(ROD_HEARTBEAT_TIMEOUT_S);
     c->settings.decimation = 1;
+    c->settings.rig = (rod_rig_t){1, 1};
     rod_angle_from_count(0, &c->angle);
     rod_rate_filter_init(&c->filter, 0);
     rod_trim_init(&c->trim);
@@ -40,6 +42,7 @@ uint8_t rod_control_arm(rod_control_t *c, uint8_t arm_mode)
     if (arm_mode == ROD_ARM_SWING_UP) {
         c->mode = ROD_MODE_SWING_UP;
         rod_swingup_init(&c->swing);
+        rod_runaway_start(&c->runaway, c->rate);
     } else if (c->mode != ROD_MODE_BALANCE) {
         c->mode = ROD_MODE_CATCH;
     }
@@ -125,6 +128,23 @@ uint8_t rod_control_set(rod_control_t *c, uint8_t param, float value)
         s->heartbeat_timeout = value;
         s->heartbeat_timeout_us = seconds_to_us(value);
         return ROD_ACK_OK;
+    case ROD_PARAM_ENCODER_SIGN:
+    case ROD_PARAM_MOTOR_SIGN:
+        if (value != 1.0f && value != -1.0f) {
+            return ROD_ACK_BAD_VALUE;
+        }
+        if (rod_mode_is_armed(c->mode)) {
+            return ROD_ACK_BAD_STATE;
+        }
+        if (param == ROD_PARAM_ENCODER_SIGN) {
+            if ((value < 0.0f) != (s->rig.encoder_sign < 0)) {
+                c->started = false; /* the counts so far had the other sign */
+            }
+            s->rig.encoder_sign = value < 0.0f ? (int8_t)-1 : (int8_t)1;
+        } else {
+            s->rig.motor_sign = value < 0.0f ? (int8_t)-1 : (int8_t)1;
+        }
+        return ROD_ACK_OK;
     default:
         return ROD_ACK_BAD_VALUE;
     }
@@ -140,7 +160,7 @@ static void trip(rod_control_t *c, uint8_t reason)
 
 /* Timing and liveness first: they decide whether this step may drive at all. Returns whether
  * this step overran. */
-static bool track_time(rod_control_t *c, const rod_inputs_t *in, uint32_t heartbeats)
+static bool track_time(rod_control_t *c, const rod_inputs_t *in, int32_t count, uint32_t heartbeats)
 {
     bool overrun = false;
     if (c->started) {
@@ -153,7 +173,7 @@ static bool track_time(rod_control_t *c, const rod_inputs_t *in, uint32_t heartb
     } else {
         /* Power-on: start the rate filter on the first real count. */
         c->started = true;
-        rod_rate_filter_init(&c->filter, in->encoder_count);
+        rod_rate_filter_init(&c->filter, count);
         c->heartbeat_us = in->now_us;
         c->heartbeats_seen = heartbeats;
     }
@@ -206,6 +226,7 @@ static bool try_catch(rod_control_t *c)
     c->upright_turn = c->angle.turn;
     rod_trim_catch(&c->trim);
     rod_observer_init(&c->obs, c->angle.from_upright - c->trim.trim, c->rate);
+    rod_runaway_start(&c->runaway, c->rate);
     c->mode = ROD_MODE_BALANCE;
     return true;
 }
@@ -257,12 +278,13 @@ static float control_law(rod_control_t *c)
 
 void rod_control_step(rod_control_t *c, const rod_inputs_t *in, uint32_t heartbeats, rod_outputs_t *out)
 {
-    bool overrun = track_time(c, in, heartbeats);
+    int32_t count = rod_rig_count(&c->settings.rig, in->encoder_count);
+    bool overrun = track_time(c, in, count, heartbeats);
 
-    c->count = in->encoder_count;
+    c->count = count;
     c->driver_fault = in->driver_fault;
-    rod_angle_from_count(in->encoder_count, &c->angle);
-    c->rate = rod_rate_filter_step(&c->filter, in->encoder_count);
+    rod_angle_from_count(count, &c->angle);
+    c->rate = rod_rate_filter_step(&c->filter, count);
 
     check_safety(c, overrun);
 
@@ -274,8 +296,14 @@ void rod_control_step(rod_control_t *c, const rod_inputs_t *in, uint32_t heartbe
     if (driving) {
         drive = rod_motor_drive(request + friction, c->rate);
         bool estimate_ok = c->mode != ROD_MODE_BALANCE || c->obs.finite;
+        bool closed_loop = c->mode == ROD_MODE_BALANCE || c->mode == ROD_MODE_SWING_UP;
         if (!estimate_ok || !isfinite(drive.torque) || !isfinite(drive.duty)) {
             trip(c, ROD_REASON_NON_FINITE);
+            driving = false;
+            drive.duty = 0.0f;
+            drive.torque = 0.0f;
+        } else if (closed_loop && rod_runaway_step(&c->runaway, drive.torque, c->rate)) {
+            trip(c, ROD_REASON_RUNAWAY);
             driving = false;
             drive.duty = 0.0f;
             drive.torque = 0.0f;
@@ -289,7 +317,7 @@ void rod_control_step(rod_control_t *c, const rod_inputs_t *in, uint32_t heartbe
     c->duty = drive.duty;
     c->torque = drive.torque;
     out->enable = driving;
-    out->duty = drive.duty;
+    out->duty = rod_rig_duty(&c->settings.rig, drive.duty);
     out->torque = drive.torque;
 }
 

@@ -19,6 +19,8 @@
  *   ANGLE_LIMIT   BALANCE and |theta_1 - the caught upright| > ROD_ANGLE_LIMIT_RAD, or
  *                 IDENTIFY and |theta_1 - the nearest hanging| > ROD_ANGLE_LIMIT_RAD
  *   NON_FINITE    NaN/inf in the estimate, torque or duty
+ *   RUNAWAY       in the first second of BALANCE or SWING_UP the base accelerated against the
+ *                 torque: a reversed encoder or motor (rod_runaway.h)
  * ("armed" = CATCH, SWING_UP, BALANCE or IDENTIFY.)
  *
  * Commands come from the host (through the device's command ring) and return a ROD_ACK_*
@@ -35,6 +37,8 @@
 #include "rod_identify.h"
 #include "rod_io.h"
 #include "rod_observer.h"
+#include "rod_rig.h"
+#include "rod_runaway.h"
 #include "rod_swingup.h"
 #include "rod_trim.h"
 #include "rod_protocol_defs.h"
@@ -51,6 +55,7 @@ typedef struct {
     float heartbeat_timeout;   /* [s], [0.05, 10] */
     uint32_t heartbeat_timeout_us;
     uint16_t decimation;       /* telemetry every this many steps, 1..1000 */
+    rod_rig_t rig;             /* wiring signs: count -> angle, duty -> driver (rod_rig.h) */
 } rod_settings_t;
 
 typedef struct {
@@ -69,13 +74,14 @@ typedef struct {
     rod_trim_t trim; /* where the rod stands upright, found from the torque (rod_trim.h) */
     rod_swingup_t swing;
     int32_t upright_turn; /* the upright being balanced: pi + 2 pi upright_turn */
+    rod_runaway_t runaway; /* the sign watch of a driving mode's first second */
 
     /* identification */
     rod_identify_t ident;
 
     /* outputs of this step */
     bool enable;
-    float duty, torque;
+    float duty, torque; /* the controller's duty, before the motor sign */
 
     /* timing and host liveness */
     bool started;
@@ -107,7 +113,8 @@ uint8_t rod_control_clear_fault(rod_control_t *c);
  * Starting counts as hearing from the host. */
 uint8_t rod_control_identify(rod_control_t *c, const rod_identify_request_t *req);
 /* param ROD_PARAM_*; out of bounds, not finite, not an integer where one is needed, or an
- * unknown param -> BAD_VALUE and nothing changes. */
+ * unknown param -> BAD_VALUE and nothing changes. ENCODER_SIGN / MOTOR_SIGN take +1 or -1, and
+ * only while not armed (BAD_STATE); a new encoder sign restarts the rate filter on the next count. */
 uint8_t rod_control_set(rod_control_t *c, uint8_t param, float value);
 
 /* The estimate as reported (telemetry, SIL): absolute angles (pi upright) and rates. Outside

@@ -15,6 +15,24 @@ void rod_device_init(rod_device_t *dev)
     dev->steps_since_hello = 0;
     dev->hello_wanted = true; /* announce ourselves on the first step */
     dev->board_fault = ROD_REASON_NONE;
+    dev->rig_source = 0u;
+    dev->save_wanted = false;
+}
+
+void rod_device_load_rig(rod_device_t *dev, const uint8_t *stored, size_t n, rod_rig_t defaults)
+{
+    dev->rig_source = rod_rig_decode(stored, n, defaults, &dev->control.settings.rig);
+}
+
+bool rod_device_take_save(rod_device_t *dev, uint8_t out[ROD_RIG_STORE_SIZE])
+{
+    if (!dev->save_wanted) {
+        return false;
+    }
+    dev->save_wanted = false;
+    rod_rig_encode(&dev->control.settings.rig, out);
+    dev->rig_source = ROD_RIG_FLAG_STORED;
+    return true;
 }
 
 /* A numbered slot for the next frame; NULL (and one drop, one number used) when the ring is
@@ -52,6 +70,9 @@ static uint8_t apply_command(rod_device_t *dev, const rod_msg_command_t *cmd)
         return rod_control_set(c, cmd->param, cmd->value);
     case ROD_MSG_HELLO_REQUEST:
         dev->hello_wanted = true;
+        return ROD_ACK_OK;
+    case ROD_MSG_SAVE_RIG:
+        dev->save_wanted = true;
         return ROD_ACK_OK;
     case ROD_MSG_IDENTIFY: {
         rod_identify_request_t req = {cmd->excitation, cmd->seed, cmd->amplitude, cmd->duration,
@@ -135,6 +156,7 @@ static void queue_hello(rod_device_t *dev, uint32_t now_us)
     h->n = ROD_N;
     h->mode = c->mode;
     h->reason = c->reason;
+    h->rig = (uint8_t)(rod_rig_sign_flags(&c->settings.rig) | dev->rig_source);
     h->period_us = ROD_LOOP_PERIOD_US;
     h->decimation = c->settings.decimation;
     h->swing_amplitude = c->settings.swing_amplitude;

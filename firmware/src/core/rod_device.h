@@ -38,6 +38,8 @@ typedef struct {
     uint32_t steps_since_hello;
     bool hello_wanted;
     uint8_t board_fault; /* ROD_REASON_* the board reported (rod_device_board_fault), NONE normally */
+    uint8_t rig_source;  /* ROD_RIG_FLAG_STORED / _STORE_CORRUPT: where the signs came from */
+    volatile bool save_wanted; /* SAVE_RIG arrived; the main loop stores the signs */
 } rod_device_t;
 
 /* Power-on state: DISARMED, driver off, default settings. */
@@ -66,6 +68,14 @@ bool rod_device_post_command(rod_device_t *dev, const rod_msg_command_t *cmd);
  * start). From then on every step ends in FAULT with this reason, outputs off, and CLEAR_FAULT
  * cannot leave it: only a reset can. Steps keep answering the host, so HELLO and telemetry say why. */
 void rod_device_board_fault(rod_device_t *dev, uint8_t reason);
+
+/* Power-on, before the timer starts: the signs the board kept (rod_rig.h; NULL / 0 when it has
+ * none), or the compiled defaults when it has none or they are unreadable (HELLO says which). */
+void rod_device_load_rig(rod_device_t *dev, const uint8_t *stored, size_t n, rod_rig_t defaults);
+
+/* Main loop: after a SAVE_RIG, true once with the bytes to keep (ROD_RIG_STORE_SIZE) in out;
+ * the board writes them to its storage (EEPROM), outside the control interrupt. */
+bool rod_device_take_save(rod_device_t *dev, uint8_t out[ROD_RIG_STORE_SIZE]);
 
 /* Main loop: count a valid host frame (keeps the heartbeat alive without sending one). */
 void rod_device_heartbeat(rod_device_t *dev);

@@ -349,7 +349,7 @@ size_t rod_proto_encode_hello(const rod_msg_hello_t *m, uint32_t seq, uint32_t t
     wr_u8(&w, m->n, 1);
     wr_u8(&w, m->mode, 1);
     wr_u8(&w, m->reason, 1);
-    wr_u8(&w, 0u, 1); /* reserved1 */
+    wr_u8(&w, m->rig, 1);
     wr_u32(&w, m->period_us, 1);
     wr_u16(&w, m->decimation, 1);
     wr_u16(&w, 0u, 1); /* reserved2 */
@@ -392,6 +392,7 @@ static int command_payload_size(uint32_t type)
     case ROD_MSG_SET: return (int)ROD_SET_PAYLOAD_SIZE;
     case ROD_MSG_HELLO_REQUEST: return (int)ROD_HELLO_REQUEST_PAYLOAD_SIZE;
     case ROD_MSG_IDENTIFY: return (int)ROD_IDENTIFY_PAYLOAD_SIZE;
+    case ROD_MSG_SAVE_RIG: return (int)ROD_SAVE_RIG_PAYLOAD_SIZE;
     default: return -1;
     }
 }
@@ -514,6 +515,7 @@ int rod_proto_decode_hello(const rod_packet_t *p, rod_msg_hello_t *m)
     m->n = q[ROD_HELLO_OFF_N];
     m->mode = q[ROD_HELLO_OFF_MODE];
     m->reason = q[ROD_HELLO_OFF_REASON];
+    m->rig = q[ROD_HELLO_OFF_RIG];
     m->period_us = get_u32(q + ROD_HELLO_OFF_PERIOD_US);
     m->decimation = (uint16_t)get_u16(q + ROD_HELLO_OFF_DECIMATION);
     m->swing_amplitude = get_f32(q + ROD_HELLO_OFF_SWING_AMPLITUDE);

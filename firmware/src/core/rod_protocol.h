@@ -36,6 +36,7 @@ typedef struct {
 /* Device -> host, on HELLO_REQUEST (and at start-up). */
 typedef struct {
     uint8_t fw_major, fw_minor, fw_patch, gains_schema, n, mode, reason;
+    uint8_t rig; /* ROD_RIG_FLAG_*: the signs in use and their source */
     uint32_t period_us;
     uint16_t decimation;
     float swing_amplitude, swing_angle, catch_angle, heartbeat_timeout, torque_max;
@@ -49,7 +50,7 @@ typedef struct {
     uint8_t mode;             /* mode after the command */
 } rod_msg_ack_t;
 
-/* Host -> device command (HEARTBEAT, ARM, DISARM, CLEAR_FAULT, SET, HELLO_REQUEST, IDENTIFY).
+/* Host -> device command (HEARTBEAT, ARM, DISARM, CLEAR_FAULT, SET, HELLO_REQUEST, IDENTIFY, SAVE_RIG).
  * status: ROD_ACK_OK, or ROD_ACK_UNKNOWN_COMMAND / ROD_ACK_BAD_LENGTH for a CRC-valid frame the
  * device must refuse. The codec checks only type and payload length; the values (arm_mode 1 or 2,
  * param 1..5, value finite and in range) are for the device to judge (ROD_ACK_BAD_VALUE).

@@ -34,6 +34,6 @@ def measure(quick: bool = False) -> dict[str, float]:
         out["matrix_runs"] = len(rows)
         wide = [r for r in rows if r["case"] == "backlash3"]
         out["backlash3_final_deg"] = round(max(r["final_dev_deg"] for r in wide), 2)
-        r = M.longest_balanced(p, designs=M.LONG_ROD_DESIGNS)
+        r = M.longest_balanced(p, designs=M.LONG_ROD_DESIGNS, band_deg=M.ROBUST_BAND_DEG)
         out["longest_rod_ratio"] = r["ratio"] if r["ratio"] is not None else 0.0
     return out

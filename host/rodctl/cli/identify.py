@@ -309,7 +309,7 @@ def buckling_line(identified) -> str:
     past = buckled_cases(identified)
     if past:
         text += ("\n  past it in the robustness matrix: " + ", ".join(f"{n} {v:.3f} x" for n, v in past.items())
-                 + "; measured, no design held a matrix run straight past 1.002 x (README \"System identification\")")
+                 + "; measured, no design held a matrix run straight past 1.002 x (docs/identification.md)")
     return text
 
 

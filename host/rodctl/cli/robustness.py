@@ -84,7 +84,7 @@ def table_lines(rows: list[dict]) -> list[str]:
         which = f" ({', '.join(f'{name} {v:.3f} x' for name, v in past.items())})" if past else ""
         lines.append("  ^ past the buckling length: the rod above the hub is longer than Greenhill's clamped length"
                      + which + ", so it bends over whenever the shaft holds still "
-                     "(rodctl gains --report; README \"System identification\")")
+                     "(rodctl gains --report; docs/identification.md)")
     return lines
 
 
@@ -151,8 +151,8 @@ def run_robustness(args) -> int:
         written.append(write_json(args.json, doc))
     if args.plot:
         on = "faithful plant" if plant is None else f"rod of {_shown_path(plant.source)}"
-        title = (f"{_shown_path(params.source)}: {sc.text()}\ncase set {args.cases!r} + Monte Carlo plants (seed {seed}) on the "
-                 f"{on}")
+        draws = f" + {samples} Monte Carlo plants (seed {seed})" if samples else ""
+        title = f"{_shown_path(params.source)}: {sc.text()}\ncase set {args.cases!r}{draws} on the {on}"
         written.append(figures.heatmap(rows, Path(args.plot), title))
     for w in written:
         print(f"wrote {w}")

@@ -17,6 +17,7 @@ import signal
 import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -40,6 +41,9 @@ def add_scope_args(p) -> None:
     p.add_argument("--record", metavar="PATH", help="record from the start to PATH (r toggles recording)")
     p.add_argument("--format", choices=FORMATS, help="recording format (default: from the extension, else csv)")
     p.add_argument("--force", action="store_true", help="replace an existing recording file")
+    p.add_argument("--screenshot", metavar="PNG",
+                   help="when the scope ends (--duration, q, Ctrl-C), save the window as it last looked to this PNG "
+                        "(its folder must exist)")
     add_design_args(p)
 
 
@@ -293,6 +297,10 @@ def run_scope(args) -> int:
         raise UserError(f"the scope needs a display: {why}. Record instead with "
                         f"`rodctl log --port {args.port or 'PORT'} --out run.csv`, then "
                         "`rodctl plot run.csv --out run.png`")
+    if getattr(args, "screenshot", None):
+        from rodctl.cli.outputs import check_output
+
+        check_output(args.screenshot, "--screenshot", force=True)
     if args.record:
         from rodctl.logs.writer import check_new, log_format
 
@@ -336,8 +344,13 @@ def run_scope(args) -> int:
                 scope.action(args.arm)
             t_end = None if args.duration is None else time.monotonic() + args.duration
 
+            shot = {"saved": False}
+
             def tick():
                 if stop.is_set() or (t_end is not None and time.monotonic() >= t_end):
+                    if args.screenshot and not shot["saved"]:  # before the window closes: what it showed last
+                        fig.savefig(args.screenshot, dpi=100)
+                        shot["saved"] = True
                     scope.stop_requested = True
                 scope.update()
 
@@ -359,6 +372,8 @@ def run_scope(args) -> int:
                 scope.finish()
             plt.close("all")
     rec = f"; recorded {', '.join(scope.recorded)}" if scope is not None and scope.recorded else ""
+    if getattr(args, "screenshot", None) and Path(args.screenshot).is_file():
+        rec += f"; screenshot {args.screenshot}"
     print(f"scope ended: {'disarmed' if s.disarm_acked else 'disarm not confirmed (the watchdog disarms)'}{rec}",
           file=sys.stderr, flush=True)
     return 0

@@ -14,7 +14,7 @@ from rodgains.errors import InputError
 from rodctl.cli.gains import add_param_args, params_from_args
 from rodctl.cli.outputs import make_folder
 
-TABLE_BEGIN = "<!-- BEGIN scenario table: regenerate with `rodctl sim --all --readme README.md` -->"
+TABLE_BEGIN = "<!-- BEGIN scenario table: regenerate with `rodctl sim --all --figures docs/img --table docs/scenarios.md` -->"
 TABLE_END = "<!-- END scenario table -->"
 
 
@@ -248,5 +248,6 @@ def register(sub) -> None:
     s.add_argument("--duration", type=float, metavar="S", help="simulated time [s] (default: the scenario's)")
     s.add_argument("--all", action="store_true", help="run every scenario (figures into --figures, no logs)")
     s.add_argument("--figures", metavar="DIR", default="docs/img", help="with --all: where figures go (docs/img)")
-    s.add_argument("--readme", metavar="PATH", help="with --all: replace the scenario table in this README")
+    s.add_argument("--table", "--readme", dest="readme", metavar="PATH",
+                   help="with --all: replace the scenario table between its markers in this page (docs/scenarios.md)")
     s.set_defaults(func=run_sim)

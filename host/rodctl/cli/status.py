@@ -6,7 +6,7 @@ import json
 
 from rodctl.cli.common import add_design_args, add_port_arg, apply_settings, design_params, session_for, stop_signals
 from rodctl.link import protocol as P
-from rodctl.link.session import SETTINGS, Session, hello_settings, name_of, parse_assignment, reason_text
+from rodctl.link.session import SETTINGS, Session, hello_settings, name_of, parse_assignment, reason_text, rig_source
 from rodctl.logs.schema import from_upright_deg
 
 
@@ -25,6 +25,7 @@ def status_report(session: Session, args=None) -> dict:
         "rate_hz": 1e6 / h.period_us,
         "decimation": h.decimation,
         "settings": hello_settings(h),
+        "signs_from": rig_source(h),
         "torque_max_Nm": h.torque_max,
         "mode": name_of(P.Mode, t.mode),
         "reason": name_of(P.Reason, t.reason),
@@ -59,6 +60,7 @@ def run_status(args) -> int:
     print(f"settings    swing_amplitude {st['swing_amplitude']:.4g} N m, swing_angle_deg {st['swing_angle_deg']:.4g}, "
           f"catch_angle_deg {st['catch_angle_deg']:.4g}, telemetry_decimation {st['telemetry_decimation']:g}, "
           f"heartbeat_timeout {st['heartbeat_timeout']:.3g} s (torque max {r['torque_max_Nm']:.3g} N m)")
+    print(f"wiring      encoder_sign {st['encoder_sign']:+.0f}, motor_sign {st['motor_sign']:+.0f} ({r['signs_from']})")
     th = ", ".join(f"{from_upright_deg(x):+.1f}" for x in r["theta_hat_rad"])
     print(f"telemetry   encoder {r['encoder_count']} counts, theta_hat [{th}] deg from upright, base rate "
           f"{r['base_rate_rad_s']:.3g} rad/s, torque {r['torque_Nm']:.3g} N m, duty {r['duty']:.3g}")

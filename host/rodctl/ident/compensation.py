@@ -32,12 +32,11 @@ then the parameter file's own shaft weight; then the ratio nearest the default's
 The second stage: when no candidate at the file's own `lqr.q_shaft_angle` passes every run and meets
 both nominal goals, every ratio is judged again at each of SHAFT_WEIGHTS stiffer than the file's own. A
 stiffer shaft holds a rod ten times more damped, and settles some rigs' nominal swing-up sooner, at the
-cost of the heavy rod (rho +15 %) on others (README "A stiffer shaft"), so it is tried only where the
+cost of the heavy rod (rho +15 %) on others (docs/design.md, "A stiffer shaft"), so it is tried only where the
 file's own weight fails, and kept only where it passes more runs, or as many with a nominal margin
 MIN_MARGIN_GAIN_S wider. A file with no shaft weight (the soft-shaft and low-ripple weights, chosen for
 rods a stiff shaft buckles or for ripple) is left as it is. Measured with the design from each rig's
-identified file, passes of 52 on the identified rig / on the hidden one (README "Friction compensation,
-chosen on the identified rig"):
+identified file, passes of 52 on the identified rig / on the hidden one (docs/identification.md):
 
     q_shaft_angle     325       400       500
     random rig s4_1   51 / 50   52 / 52   51 / 52   (325 drops damping x10 balance)
@@ -56,7 +55,7 @@ from rodgains.params import Params
 RATIOS = (1.2, 1.3, 1.4, 1.5, 1.75, 2.0, 2.5)  # candidates, x the identified Coulomb friction [-]
 SHAFT_WEIGHTS = (400.0,)  # lqr.q_shaft_angle tried when none passes at the file's own [1/rad^2]
 # A stiffer shaft with no more passes must win the nominal margin by this much to replace the file's own
-# weight: settling jumps by tenths of a second from one compensation to the next (README), and a smaller
+# weight: settling jumps by tenths of a second from one compensation to the next (docs/scenarios.md), and a smaller
 # gain is that noise, not the weight [s].
 MIN_MARGIN_GAIN_S = 0.1
 DEFAULT_RATIO = 1.5  # the default file's 7.4 mN m on 5 mN m, the tie-break [-]

@@ -38,7 +38,7 @@ UNIDENTIFIABLE_REL_CI = 0.5  # a 95 % half-width beyond 50 % of the value: not i
 # flexible edges (a DER plant integrates at ~12 steps per control period, ~5x slower). Its mismatch
 # with a DER rig biases the viscous friction: on 30 random DER N = 30 rigs it came out -5.8 % to
 # +7.5 % (5 of 30 beyond 5 %), so the best start is then polished on the file's own plant
-# (`polish` in fit()), which brought those rigs within 1.5 % (README, rodctl identify).
+# (`polish` in fit()), which brought those rigs within 1.5 % (docs/identification.md).
 FAST_MODEL_EDGES = 20
 POLISH_NFEV = 30  # simulations the polish may take: it starts next to the optimum
 STILL_WINDOW = 25  # periods each side: a sample whose count did not change within them is "still"

@@ -62,6 +62,7 @@ AckResult = ENUMS["ack_result"]
 ArmMode = ENUMS["arm_mode"]
 Param = ENUMS["param"]
 TelemetryFlag = ENUMS["telemetry"]
+RigFlag = ENUMS["rig"]
 
 # value -> member lookups, so decoding gives enum members for known codes and plain ints otherwise
 _CODE_MAPS = {k: {int(m): m for m in e} for k, e in ENUMS.items() if not issubclass(e, enum.IntFlag)}
@@ -106,6 +107,8 @@ Disarm = MESSAGE_CLASSES[MsgType.DISARM]
 ClearFault = MESSAGE_CLASSES[MsgType.CLEAR_FAULT]
 Set = MESSAGE_CLASSES[MsgType.SET]
 HelloRequest = MESSAGE_CLASSES[MsgType.HELLO_REQUEST]
+Identify = MESSAGE_CLASSES[MsgType.IDENTIFY]
+SaveRig = MESSAGE_CLASSES[MsgType.SAVE_RIG]
 
 TO_HOST = frozenset(m.id for m in SPEC.messages if m.direction == "to_host")
 TO_DEVICE = frozenset(m.id for m in SPEC.messages if m.direction == "to_device")

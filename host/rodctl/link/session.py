@@ -51,6 +51,7 @@ REASON_TEXT = {
     P.Reason.NON_FINITE: "non-finite estimate",
     P.Reason.OVERRUN: "control step overrun",
     P.Reason.NO_TIMER: "the board's control timer did not start (reset the board)",
+    P.Reason.RUNAWAY: "runaway: the base accelerated against the torque (a reversed encoder or motor: run `rodctl check`)",
 }
 
 ARMED_MODES = (P.Mode.BALANCE, P.Mode.SWING_UP, P.Mode.CATCH, P.Mode.IDENTIFY)
@@ -153,6 +154,29 @@ class Setting:
         return f"{lo}{bound} {self.unit}"
 
 
+    def value_of(self, hello) -> float:
+        """This setting's value in a HELLO [user unit]."""
+        return self.from_device(getattr(hello, self.hello_field))
+
+
+class SignSetting(Setting):
+    """A wiring sign (+1 or -1): set while disarmed, reported in HELLO's rig bits, kept by SAVE_RIG."""
+
+    def __init__(self, name: str, param, flag):
+        super().__init__(name, param, "", "rig", integer=True)
+        self.flag = flag
+
+    def check(self, v: float, hello=None, design_params=None) -> None:
+        if v not in (1.0, -1.0):
+            raise InputError(f"{self.name}={v:g} out of range: allowed {self.allowed()}")
+
+    def allowed(self, hello=None, design_params=None) -> str:
+        return f"{self.name} = 1 or -1"
+
+    def value_of(self, hello) -> float:
+        return -1.0 if int(hello.rig) & int(self.flag) else 1.0
+
+
 _DEG = math.pi / 180.0
 SETTINGS = {s.name: s for s in (
     Setting("swing_amplitude", P.Param.SWING_AMPLITUDE, "N m", "swing_amplitude"),
@@ -160,7 +184,19 @@ SETTINGS = {s.name: s for s in (
     Setting("catch_angle_deg", P.Param.CATCH_ANGLE, "deg", "catch_angle", scale=_DEG),
     Setting("telemetry_decimation", P.Param.TELEMETRY_DECIMATION, "", "decimation", integer=True),
     Setting("heartbeat_timeout", P.Param.HEARTBEAT_TIMEOUT, "s", "heartbeat_timeout"),
+    SignSetting("encoder_sign", P.Param.ENCODER_SIGN, P.RigFlag.ENCODER_REVERSED),
+    SignSetting("motor_sign", P.Param.MOTOR_SIGN, P.RigFlag.MOTOR_REVERSED),
 )}
+
+
+def rig_source(hello) -> str:
+    """Where the board's wiring signs came from at power-on (HELLO rig bits)."""
+    rig = int(hello.rig)
+    if rig & int(P.RigFlag.STORE_CORRUPT):
+        return "compiled defaults: the stored settings were unreadable"
+    if rig & int(P.RigFlag.STORED):
+        return "stored on the board"
+    return "compiled defaults"
 
 
 def parse_assignment(text: str) -> tuple[Setting, float]:
@@ -176,7 +212,7 @@ def parse_assignment(text: str) -> tuple[Setting, float]:
 
 def hello_settings(hello) -> dict[str, float]:
     """The settings of a HELLO in the user's units (the names of `rodctl set`)."""
-    return {s.name: s.from_device(getattr(hello, s.hello_field)) for s in SETTINGS.values()}
+    return {s.name: s.value_of(hello) for s in SETTINGS.values()}
 
 
 # ---- opening ports -------------------------------------------------------------------------------

@@ -36,6 +36,8 @@ import time
 from pathlib import Path
 from typing import Callable
 
+from rodctl.sim.faults import STALE_OVERRIDE_KEY, STALE_FACTOR, Faults, Hand
+
 PLANT_KINDS = ("inextensible", "der")
 
 _POOL_LOCK = threading.Lock()
@@ -55,6 +57,8 @@ def _prototype(lib: ctypes.CDLL) -> ctypes.CDLL:
         "rod_dev_status": (i, [ctypes.POINTER(ctypes.c_float), i]),
         "rod_dev_write": (sz, [ctypes.c_char_p, sz]),
         "rod_dev_read": (sz, [ctypes.c_void_p, sz]),
+        "rod_dev_load_rig": (None, [ctypes.c_char_p, sz]),
+        "rod_dev_take_save": (sz, [ctypes.c_void_p, sz]),
     }
     for name, (res, args) in protos.items():
         fn = getattr(lib, name)
@@ -94,7 +98,7 @@ class VirtualDevice:
 
     def __init__(self, params=None, *, plant: str | None = None, edges: int | None = None,
                  params_path: str | None = None, tx_capacity: int = 0, overrides=(), theta0_deg: float = 0.0,
-                 plant_params=None):
+                 plant_params=None, faults=None, eeprom: str | None = None):
         from rodgains.params import load_params
 
         from rodctl.build.sil_build import build_sil
@@ -111,7 +115,13 @@ class VirtualDevice:
         self.params_path = params_path
         self.overrides = list(overrides)
         self.theta0_deg = float(theta0_deg)
-        self.lib_path = build_sil(self.params)
+        self.faults = faults if faults is not None else Faults()
+        # header=stale: the board runs firmware designed from other parameters than these
+        built = self.params
+        if self.faults.header_stale:
+            e = float(self.params[STALE_OVERRIDE_KEY.split(".")[0]][STALE_OVERRIDE_KEY.split(".")[1]])
+            built = self.params.with_overrides(f"{STALE_OVERRIDE_KEY}={e * STALE_FACTOR!r}")
+        self.lib_path = build_sil(built)
         # plant_params (sim://?plant=FILE.toml): the rod the board really drives, which the firmware's
         # parameters only estimate (what `rodctl identify` must recover). Its [plant] table is the model.
         self.plant_params = plant_params
@@ -133,14 +143,33 @@ class VirtualDevice:
         self._buf = ctypes.create_string_buffer(65536)
         self._buf_addr = ctypes.addressof(self._buf)
         self.lib.rod_dev_reset(tx_capacity)
+        # The board's EEPROM: what SAVE_RIG stored, read back at power-on (a file with eeprom=PATH,
+        # else blank at every power-on and kept in memory while the board runs).
+        self.eeprom_path = Path(eeprom) if eeprom else None
+        self.eeprom = self.eeprom_path.read_bytes() if self.eeprom_path and self.eeprom_path.is_file() else b""
+        self.lib.rod_dev_load_rig(self.eeprom or None, len(self.eeprom))
+        self._save_buf = ctypes.create_string_buffer(16)
         self.steps = 0
         self._closed = False
+        f = self.faults
+        # the encoder's own counts per output turn, and where the board took its zero at boot
+        rig = self.plant_params if self.plant_params is not None else self.params
+        self._nominal_cpr = float(rig["encoder"]["counts_per_motor_rev"]) * float(rig["motor"]["gear_ratio"])
+        self._count_scale = (f.counts_per_rev / self._nominal_cpr) if f.counts_per_rev else 1.0
+        self._boot_offset = 0
+        if f.boot_angle_deg:
+            cpr = f.counts_per_rev or self._nominal_cpr
+            self._boot_offset = int(round(f.boot_angle_deg / 360.0 * cpr))
+        self._hand: Hand | None = None
+        self._hand_done = 0  # hand turns finished (read by other threads)
 
     @classmethod
     def from_options(cls, *, plant: str | None = None, edges: int | str | None = None,
-                     params: str | None = None, set=(), theta0_deg: float | str | None = None) -> "VirtualDevice":
+                     params: str | None = None, set=(), theta0_deg: float | str | None = None,
+                     eeprom: str | None = None, **faults: str) -> "VirtualDevice":
         """A board from sim:// URL options (strings): plant, edges, params (file), set (list of
-        section.key=value overrides), theta0_deg (every edge's angle at power-on, 0 hanging, 180 upright)."""
+        section.key=value overrides), theta0_deg (every edge's angle at power-on, 0 hanging, 180 upright),
+        eeprom (a file that keeps the board's stored rig settings across power-ons), and wiring faults (rodctl.sim.faults: encoder_sign=-1, motor_sign=-1, encoder=dead, ...)."""
         from rodgains.errors import InputError
 
         if isinstance(set, str):
@@ -165,7 +194,8 @@ class VirtualDevice:
 
             plant_params, plant = load_params(plant), None
         return cls(plant=plant or None, edges=edges, params_path=params, overrides=list(set),
-                   theta0_deg=theta0, plant_params=plant_params)
+                   theta0_deg=theta0, plant_params=plant_params, faults=Faults.from_options(faults),
+                   eeprom=eeprom or None)
 
     # --- one thread drives all of these ----------------------------------------------------
     @property
@@ -177,15 +207,52 @@ class VirtualDevice:
         """Host bytes into the board's RX buffer; returns how many it took (the rest: offer later)."""
         return self.lib.rod_dev_write(data, len(data))
 
+    def hand_turn(self, peak_deg: float, seconds: float = 2.0) -> None:
+        """A hand turns the rod by its hub `peak_deg` counter-clockwise (seen from the front) and back
+        over `seconds`, then lets go. Safe to call from another thread: the runner picks it up."""
+        self._hand = Hand(peak_deg, seconds)
+
+    @property
+    def hand_turns_done(self) -> int:
+        return self._hand_done
+
+    def _encoder_count(self) -> int:
+        """The count the board's quadrature decoder holds, faults included."""
+        f = self.faults
+        if f.encoder_dead:
+            return 0
+        raw = self.plant.encoder()
+        if self._count_scale != 1.0:
+            raw = int(round(raw * self._count_scale))
+        raw *= f.encoder_sign * (-1 if f.ab_swapped else 1)
+        return raw - self._boot_offset * f.encoder_sign * (-1 if f.ab_swapped else 1)
+
     def step(self) -> None:
-        lib, plant = self.lib, self.plant
-        count = plant.encoder()
-        lib.rod_dev_step(count, (self.steps * self.period_us) & 0xFFFFFFFF, 0, 0)
+        lib, plant, f = self.lib, self.plant, self.faults
+        hand = self._hand
+        if hand is not None:
+            th, dth = plant.state()
+            tq = hand.torque(self.time, float(th[0]), float(dth[0]))
+            if tq is None:
+                self._hand = None
+                self._hand_done += 1
+                tq = 0.0
+            plant.external_torque = tq
+        count = self._encoder_count()
+        lib.rod_dev_step(count, (self.steps * self.period_us) & 0xFFFFFFFF, 0, 1 if f.nfault_low else 0)
         duty = lib.rod_dev_duty() if lib.rod_dev_enable() else 0.0
-        if not math.isfinite(duty):
+        if not math.isfinite(duty) or f.supply_off:
             duty = 0.0
-        plant.advance(duty, self.period)
+        plant.advance(duty * f.motor_sign, self.period)
         self.steps += 1
+        if lib.rod_dev_take_save(self._save_buf, 16):
+            self._store(self._save_buf.raw[:8])
+
+    def _store(self, data: bytes) -> None:
+        """SAVE_RIG: the bytes the board writes to its EEPROM."""
+        self.eeprom = data
+        if self.eeprom_path is not None:
+            self.eeprom_path.write_bytes(data)
 
     def read(self) -> bytes:
         """Device bytes the board's USB would send now (whole frames)."""
@@ -208,6 +275,8 @@ class VirtualDevice:
     def describe(self) -> str:
         start = "hanging at rest" if not self.theta0_deg else f"at rest at {self.theta0_deg:g} deg"
         over = f" with --set {' '.join(self.overrides)}" if self.overrides else ""
+        if self.faults.any:
+            start += f"; wiring faults: {self.faults.describe()}"
         return (f"firmware N={self.edges} at {1 / self.period:g} Hz (parameters {self.params.sha256()[:16]}{over}), "
                 f"plant {self.kind} with {self.plant.N} edges, duty input, {start}")
 

@@ -13,6 +13,7 @@
 
 #include "Arduino.h"
 #include "IntervalTimer.h"
+#include "avr/eeprom.h"
 
 volatile uint32_t stub_reg32[1024];
 volatile uint16_t stub_reg16[64];
@@ -30,6 +31,18 @@ static std::vector<uint8_t> out_bytes, host_bytes;
 static size_t host_pos;
 static std::vector<uint64_t> refresh_ms;
 static uint16_t last_refresh_value;
+
+// The EEPROM emulation: erased (0xFF) at power-on, as a new Teensy's
+static uint8_t eeprom[2048];
+static bool eeprom_ready = (memset(eeprom, 0xFF, sizeof eeprom), true);
+extern "C" void eeprom_read_block(void *buf, const void *addr, uint32_t len)
+{
+    memcpy(buf, eeprom + (uintptr_t)addr, len);
+}
+extern "C" void eeprom_write_block(const void *buf, void *addr, uint32_t len)
+{
+    memcpy(eeprom + (uintptr_t)addr, buf, len);
+}
 
 void digitalWriteFast(uint8_t pin, uint8_t val)
 {

@@ -16,8 +16,9 @@
 #define BOARD_PIN_NFAULT 8  // PTD3, open drain from the driver: INPUT_PULLUP, low = fault
 #define BOARD_PIN_LED 13    // PTC5, on-board LED
 
-// Sign conventions of the wiring (commissioning: theta_1 and the count must rise together, and
-// a positive duty must accelerate theta_1 positively). Flip one of these rather than rewiring.
+// The wiring's signs when the board has none stored: theta_1 and the count must rise together, and
+// a positive duty must accelerate theta_1 positively. `rodctl check --fix` measures them and stores
+// them on the board (SAVE_RIG), which then wins over these; the core applies them (rod_rig.h).
 #define BOARD_ENCODER_SIGN 1
 #define BOARD_MOTOR_DIR_SIGN 1
 

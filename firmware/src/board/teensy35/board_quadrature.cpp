@@ -39,5 +39,5 @@ int32_t board_quadrature_count()
     // The signed 16-bit difference is the motion since the last call, across counter wrap.
     extended += (int16_t)(uint16_t)(hw - last_hw);
     last_hw = hw;
-    return BOARD_ENCODER_SIGN * extended;
+    return extended;  // the core applies the rig's encoder sign (rod_rig.h)
 }

@@ -17,6 +17,7 @@
 
 #include "board_pins.h"
 #include "board_quadrature.h"
+#include "board_storage.h"
 #include "board_watchdog.h"
 #include "rod_device.h"
 
@@ -52,7 +53,7 @@ static void apply(const rod_outputs_t &out)
     if (!out.enable) {
         digitalWriteFast(BOARD_PIN_NEN, HIGH);  // off first, then the PWM
     }
-    float duty = (float)BOARD_MOTOR_DIR_SIGN * (out.enable ? out.duty : 0.0f);
+    float duty = out.enable ? out.duty : 0.0f;  // signed by the core (the rig's motor sign)
     uint32_t level = (uint32_t)(fabsf(duty) * (float)PWM_FULL + 0.5f);
     if (level > PWM_FULL) {
         level = PWM_FULL;
@@ -167,6 +168,16 @@ static void service_tx()
     }
 }
 
+// SAVE_RIG: the EEPROM emulation blocks for a few ms per write, so it happens here, never in the
+// control interrupt.
+static void service_storage()
+{
+    uint8_t bytes[ROD_RIG_STORE_SIZE];
+    if (rod_device_take_save(&device, bytes)) {
+        board_storage_write(bytes, sizeof bytes);
+    }
+}
+
 static void service_watchdog()
 {
 #if BOARD_WATCHDOG_ENABLED
@@ -245,6 +256,13 @@ void setup()
     // loop() is non-blocking and copes with no host (frames are dropped and counted).
     Serial.begin(115200);  // USB: the baud rate is ignored
     rod_device_init(&device);
+    {
+        uint8_t stored[ROD_RIG_STORE_SIZE];
+        board_storage_read(stored, sizeof stored);
+        // BOARD_*_SIGN are the compiled defaults, for a board with nothing (or nothing readable) stored
+        rod_device_load_rig(&device, stored, sizeof stored,
+                            (rod_rig_t){(int8_t)BOARD_ENCODER_SIGN, (int8_t)BOARD_MOTOR_DIR_SIGN});
+    }
 
     control_timer.priority(BOARD_CONTROL_IRQ_PRIORITY);  // before begin(): begin applies it
     if (!control_timer.begin(control_step, ROD_LOOP_PERIOD_US)) {
@@ -266,6 +284,7 @@ void loop()
     }
     service_rx();
     service_tx();
+    service_storage();
     service_watchdog();
     service_led();
 }

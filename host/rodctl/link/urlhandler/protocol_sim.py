@@ -16,6 +16,11 @@ in real time; closing powers it off. Options in the query:
                              gains/rodgains/default.toml)
     set=SECTION.KEY=VALUE    override one parameter of both (repeatable; `--set` of device commands)
     theta0_deg=DEG           every edge's angle at power-on (0 hanging, 180 upright; default 0)
+    eeprom=PATH              the board's EEPROM as a file: the rig settings SAVE_RIG stored, read at power-on
+                             (default: blank at every power-on)
+    encoder_sign=-1, motor_sign=-1, encoder=dead, ab_swapped, counts_per_rev=X, nfault=low, supply=off,
+    boot_angle_deg=DEG, header=stale, hand=none
+                             wiring faults of a first power-on (rodctl.sim.faults), for `rodctl check`
 Writes go to the board's RX buffer, reads return what its USB would send. Baud rate and line
 settings are accepted and ignored, as by the Teensy's USB serial.
 """
@@ -28,7 +33,9 @@ import urllib.parse as urlparse
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
 
-OPTIONS = ("plant", "edges", "params", "set", "theta0_deg")
+from rodctl.sim.faults import FAULT_OPTIONS
+
+OPTIONS = ("plant", "edges", "params", "set", "theta0_deg", "eeprom", *FAULT_OPTIONS)
 REPEATABLE = ("set",)
 
 

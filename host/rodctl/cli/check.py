@@ -1,0 +1,109 @@
+"""rodctl check: the first power-on's bring-up check (rodctl.check)."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+from rodctl.cli.common import add_design_args, add_port_arg, session_for, stop_signals
+from rodctl.cli.outputs import check_output
+
+
+def _design(args):
+    from rodgains.params import DEFAULT_PARAMS, load_params
+
+    from rodctl.logs.metadata import shown
+
+    params = load_params(args.params, args.overrides)
+    label = shown(args.params or DEFAULT_PARAMS)
+    over = "".join(f" --set {o}" for o in args.overrides)
+    flash = f"rodctl flash{f' --params {args.params}' if args.params else ''}{over}"
+    return params, label + over, flash
+
+
+def _write_json(path: str, data: dict) -> None:
+    """Whole or not at all: a temporary file beside it, renamed."""
+    folder = Path(path).resolve().parent
+    fd, tmp = tempfile.mkstemp(prefix=".check-", suffix=".json", dir=folder)
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump(data, f, indent=1)
+            f.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _fix(session, report, yes: bool) -> None:
+    """--fix: store the signs the check measured wrong on the board, after a yes."""
+    from rodctl.check.runner import store_signs
+
+    if not report.fixes:
+        why = ("nothing to fix" if report.passed or not any(r.step in ("encoder", "motor") and r.status == "FAIL"
+                                                             for r in report.results)
+               else "no sign was measured unambiguously (the encoder step needs a hand)")
+        print(f"fix: {why}; the board's signs are unchanged")
+        return
+    text = ", ".join(f"{k}={v:+d}" for k, v in report.fixes.items())
+    if not yes:
+        print(f"Store {text} on the board? [y/N] ", end="", file=sys.stderr, flush=True)
+        if sys.stdin.readline().strip().lower() not in ("y", "yes"):
+            print("fix: not stored", file=sys.stderr)
+            return
+    now = store_signs(session, report.fixes)
+    report.stored = {k: int(now[k]) for k in report.fixes}
+    print(f"fix: stored {text} on the board (its HELLO: encoder_sign {now['encoder_sign']:+.0f}, motor_sign "
+          f"{now['motor_sign']:+.0f}, stored); run `rodctl check` again to prove them")
+
+
+def run_check_command(args) -> int:
+    from rodctl.check import run_check
+    from rodctl.check.user import user_for
+
+    if args.json:
+        check_output(args.json, "--json")
+    params, label, flash = _design(args)
+    say = lambda text: print(f"  {text}", file=sys.stderr, flush=True)  # noqa: E731
+    show = lambda r: print(r.line(), flush=True)  # noqa: E731
+    try:
+        with stop_signals(), session_for(args) as s:
+            user = user_for(s, args.yes)
+            if type(user).__name__ == "VirtualHand":
+                say("sim://: the virtual board's hand turns the rod when a step asks for a hand")
+            report = run_check(s, params, label, user, say=say, report=show, flash_hint=flash)
+            if args.fix:
+                _fix(s, report, args.yes)
+    except KeyboardInterrupt:
+        print("rodctl: interrupted; the board is disarmed (nothing was written)", file=sys.stderr)
+        return 130
+    print(report.summary())
+    if args.json:
+        _write_json(args.json, report.to_json())
+    return 0 if report.passed else 1
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "check", help="first power-on: prove the wiring, the signs and the loop before the first arm",
+        description="A guided bring-up check of a powered rig: identity (firmware, protocol, the header's design "
+                    "against --params), loop health over 2 s, the driver's nFAULT, the encoder (at rest, and a "
+                    "quarter turn by hand), the motor's direction and gain (short torque pulses with the rod "
+                    "hanging, through IDENTIFY and all its safety), and the heartbeat trip. Each step ends with "
+                    "one line: PASS, FAIL or SKIP, what was measured, and the fix; --fix stores the wiring signs it measured "
+                    "wrong on the board. Never arms balance or "
+                    "swing-up; the board is left disarmed. Exit 0 when nothing failed, 1 when a step failed "
+                    "or the board does not answer, 2 on bad input.")
+    add_port_arg(p)
+    add_design_args(p)
+    p.add_argument("--yes", action="store_true",
+                   help="ask nothing; a step that needs a hand at the rod says so and is skipped "
+                        "(on sim:// the virtual board's hand does it)")
+    p.add_argument("--fix", action="store_true",
+                   help="afterwards, store the encoder and motor signs the check measured wrong on the board "
+                        "(its EEPROM; asked first unless --yes), so no reflash is needed")
+    p.add_argument("--json", metavar="PATH", help="also write every step's result and numbers as JSON")
+    p.set_defaults(func=run_check_command)

@@ -1,0 +1,219 @@
+"""`rodctl check` against the virtual board, right and with each first-power-on fault (sim:// options):
+the exact FAIL line and its fix, the exit status, the JSON, Ctrl-C, a silent board, bad input."""
+
+from __future__ import annotations
+
+import json
+import os
+import pty
+import signal
+import time
+
+import pytest
+
+from host_tools import run_rodctl, sim_device, start_rodctl
+
+ENCODER_SIGN_FIX = ("Fix: the encoder counts backwards: flip the board's encoder sign (`rodctl check --fix` stores "
+                    "it), or swap the encoder's A and B wires")
+MOTOR_SIGN_FIX = ("Fix: the motor turns the wrong way: flip the board's motor sign (`rodctl check --fix` stores it), "
+                  "or swap the motor leads M1 and M2")
+STEPS = ("identity", "loop", "driver", "encoder", "motor", "heartbeat")
+
+
+def check(url: str, *args, input: str | None = None):
+    r = run_rodctl("check", "--port", url, *args, timeout=240, input=input)
+    lines = {ln.split()[1]: ln for ln in r.stdout.splitlines() if ln[:4] in ("PASS", "FAIL", "SKIP")}
+    return r, lines
+
+
+def test_a_right_board_passes_every_step_and_writes_the_json(tmp_path):
+    out = tmp_path / "check.json"
+    r, lines = check("sim://", "--json", str(out))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert list(lines) == list(STEPS)
+    assert all(ln.startswith("PASS") for ln in lines.values()), r.stdout
+    assert "the design of gains/rodgains/default.toml" in lines["identity"]
+    assert "signs encoder +1 motor +1 (compiled defaults)" in lines["identity"]
+    assert "0 overruns; telemetry 1000 of 1000 Hz, 0 frames dropped" in lines["loop"]
+    assert "the turn read +2" in lines["encoder"]  # about +245 counts: a quarter turn of 979.2
+    assert "tripped HEARTBEAT after 0.50" in lines["heartbeat"]
+    assert r.stdout.splitlines()[-1].startswith("check: 6 passed, 0 failed, 0 skipped")
+    data = json.loads(out.read_text())
+    assert data["passed"] is True and [x["step"] for x in data["results"]] == list(STEPS)
+    motor = data["results"][4]["values"]
+    assert 0.7 < motor["gain"] < 1.4  # the rig is its own model
+    assert abs(data["results"][3]["values"]["turn_peak_deg"] - 90) < 8
+    assert abs(data["results"][5]["values"]["trip_s"] - 0.5) <= 0.003
+
+
+# fault -> (step, start of its FAIL line's measurement, its fix)
+FAULTS = {
+    "encoder_sign=-1": ("encoder", "still at rest, hanging 0 counts from zero; the turn read -2", ENCODER_SIGN_FIX),
+    "ab_swapped": ("encoder", "still at rest, hanging 0 counts from zero; the turn read -2", ENCODER_SIGN_FIX),
+    "motor_sign=-1": ("motor", "+-20 mN m pulses: the rod moved -", MOTOR_SIGN_FIX),
+    "encoder=dead": ("encoder", "still at rest, hanging 0 counts from zero; the count did not change while the "
+                                "rod turned", "Fix: the encoder is not connected: check the encoder's 5 V and GND, "
+                                              "and A and B to pins 3 and 4 (docs/wiring.md)"),
+    "counts_per_rev=1958.4": ("encoder", "still at rest, hanging 0 counts from zero; the turn read +4",
+                              "Fix: the counts per output turn are not 979.2: check encoder.counts_per_motor_rev "
+                              "and motor.gear_ratio in gains/rodgains/default.toml (a gearmotor of another ratio?)"),
+    "nfault=low": ("driver", "nFAULT is low: the MAX14870 reports a fault and the board keeps the motor off",
+                   "Fix: check the motor supply (VM, 4.5 to 36 V) and that the motor leads do not short, and "
+                   "nFAULT's wire to pin 8 (docs/wiring.md)"),
+    "supply=off": ("motor", "+-20 mN m pulses moved the encoder ",
+                   "Fix: the motor gets no power: the motor supply (VM) is off or the motor leads M1/M2 are loose; "
+                   "or the encoder is not connected (the encoder step tells which)"),
+    "boot_angle_deg=10": ("encoder", "the hanging rod reads -27 counts (-9.9 deg) from zero",
+                          "Fix: the board takes its zero at power-on: let the rod hang still, then reset the board "
+                          "(its button, or unplug and replug USB)"),
+    "header=stale": ("identity", "firmware 0.1.0, protocol v1, N=8 at 1000 Hz, signs encoder +1 motor +1 "
+                                 "(compiled defaults), header ",
+                     "Fix: the board runs another design: flash this one with `rodctl flash`"),
+}
+
+
+@pytest.mark.parametrize("fault", list(FAULTS))
+def test_each_fault_fails_its_step_with_the_fix(fault):
+    step, measured, fix = FAULTS[fault]
+    r, lines = check(f"sim://?{fault}")
+    assert r.returncode == 1, r.stdout + r.stderr
+    line = lines[step]
+    assert line.startswith(f"FAIL {step:<9} {measured}"), line
+    assert line.endswith(fix), line
+    assert "Traceback" not in r.stderr
+    # the steps before the faulty one pass; the board is never armed for balance or swing-up
+    for before in STEPS[:STEPS.index(step)]:
+        assert lines[before].startswith("PASS"), (fault, lines[before])
+
+
+def test_a_reversed_motor_with_a_reversed_encoder_is_told_apart():
+    r, lines = check("sim://?encoder_sign=-1&motor_sign=-1")
+    assert lines["encoder"].endswith(ENCODER_SIGN_FIX)
+    assert lines["motor"].startswith("FAIL") and lines["motor"].endswith(MOTOR_SIGN_FIX)
+
+
+def test_a_reversed_encoder_alone_leaves_the_motor_passing():
+    r, lines = check("sim://?encoder_sign=-1")
+    assert lines["motor"].startswith("PASS") and "the motor turns the right way" in lines["motor"]
+
+
+def test_a_wrong_gear_ratio_shows_in_the_motor_gain_too():
+    r, lines = check("sim://?counts_per_rev=2937.6")
+    assert "3.0 x a quarter turn" in lines["encoder"]
+    assert lines["motor"].startswith("FAIL") and "more motion than the model: check motor.torque_constant" \
+        in lines["motor"]
+
+
+def test_yes_skips_the_hand_and_then_cannot_tell_encoder_from_motor():
+    r, lines = check("sim://?hand=none&motor_sign=-1", "--yes")
+    assert lines["encoder"] == ("SKIP encoder   still at rest, hanging 0 counts from zero; the direction was not "
+                                "checked. Why: turning the rod needs a hand (--yes asks nobody; without --yes, press Enter at the rod)")
+    assert lines["motor"].endswith("Fix: the encoder or the motor is reversed: the encoder step with a hand "
+                                   "(without --yes) tells which")
+    assert r.returncode == 1
+
+
+def test_no_answer_at_the_prompt_skips_the_hand_step():
+    r, lines = check("sim://?hand=none", input="")
+    assert lines["encoder"].startswith("SKIP encoder")
+
+
+def test_a_person_who_presses_enter_but_does_not_turn_fails_the_encoder():
+    r, lines = check("sim://?hand=none", input="\n")
+    assert "Turn the rod by hand about a quarter turn counter-clockwise (seen from the front)" in r.stdout + r.stderr
+    assert lines["encoder"].startswith("FAIL encoder   still at rest, hanging 0 counts from zero; the count did "
+                                       "not change while the rod turned")
+
+
+@pytest.mark.parametrize("url, message", [
+    ("sim://?encoder=broken", "rodctl: sim://: encoder=broken: choose one of ok, dead"),
+    ("sim://?magnet=1", "rodctl: cannot open sim://?magnet=1: unknown sim:// option 'magnet'"),
+    ("sim://?boot_angle_deg=400", "rodctl: sim://: boot_angle_deg must be within -180..180 [deg], got '400'"),
+])
+def test_a_bad_fault_option_is_one_line_and_exit_2(url, message):
+    r = run_rodctl("check", "--port", url, "--yes", timeout=120)
+    assert r.returncode == 2
+    assert r.stderr.startswith(message) and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert r.stdout == ""
+
+
+def test_json_into_a_missing_folder_is_refused_before_the_board_is_touched(tmp_path):
+    r = run_rodctl("check", "--port", "sim://", "--json", str(tmp_path / "no" / "c.json"), timeout=60)
+    assert r.returncode == 2 and "does not exist" in r.stderr and r.stdout == ""
+
+
+def test_a_board_that_does_not_answer_exits_1_with_one_line():
+    master, slave = pty.openpty()  # a port that exists, with nothing behind it
+    try:
+        r = run_rodctl("check", "--port", os.ttyname(slave), "--yes", timeout=120)
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert r.returncode == 1
+    assert len(r.stderr.strip().splitlines()) == 1 and "no rodlink frames within" in r.stderr, r.stderr
+
+
+def test_ctrl_c_during_the_pulses_leaves_the_board_disarmed():
+    with sim_device() as (dev, port):
+        proc = start_rodctl("check", "--port", port, "--yes")
+        seen = ""
+        deadline = time.monotonic() + 120
+        while "motor:" not in seen and time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            if not line:
+                break
+            seen += line
+        assert "motor:" in seen, seen
+        time.sleep(0.2)  # the pulses are playing
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+        assert proc.returncode == 130
+        assert err.strip().splitlines()[-1] == "rodctl: interrupted; the board is disarmed (nothing was written)"
+        st = run_rodctl("status", "--port", port, "--json", timeout=60)
+        status = json.loads(st.stdout)
+        assert (status["mode"], status["reason"]) == ("DISARMED", "HOST")  # disarmed by the host, not a timeout
+
+
+def test_fix_stores_the_measured_signs_and_the_next_power_on_passes(tmp_path):
+    """Both signs wrong: --fix --yes stores both (SAVE_RIG into the board's EEPROM, a file here); the board
+    powered on again reads them, and the same miswired rig passes every step with no reflash."""
+    url = f"sim://?encoder_sign=-1&motor_sign=-1&eeprom={tmp_path / 'eeprom.bin'}"
+    r, lines = check(url, "--fix", "--yes", "--json", str(tmp_path / "c.json"))
+    assert r.returncode == 1
+    assert ("fix: stored encoder_sign=-1, motor_sign=-1 on the board (its HELLO: encoder_sign -1, motor_sign -1, "
+            "stored)") in r.stdout
+    assert json.loads((tmp_path / "c.json").read_text())["stored"] == {"encoder_sign": -1, "motor_sign": -1}
+    again, lines = check(url)
+    assert again.returncode == 0, again.stdout
+    assert "signs encoder -1 motor -1 (stored on the board)" in lines["identity"]
+    assert all(ln.startswith("PASS") for ln in lines.values())
+
+
+def test_fix_stores_nothing_it_could_not_measure(tmp_path):
+    r, lines = check(f"sim://?hand=none&motor_sign=-1&eeprom={tmp_path / 'e.bin'}", "--fix", "--yes")
+    assert "fix: no sign was measured unambiguously (the encoder step needs a hand); the board's signs are " \
+           "unchanged" in r.stdout
+    assert not (tmp_path / "e.bin").exists()
+
+
+def test_unreadable_stored_settings_fall_back_to_the_compiled_defaults_and_say_so(tmp_path):
+    bad = tmp_path / "eeprom.bin"
+    bad.write_bytes(b"RG\x01\xff\x01\x00\x12\x34")  # a record with a wrong CRC
+    r = run_rodctl("status", "--port", f"sim://?eeprom={bad}", timeout=60)
+    assert "wiring      encoder_sign +1, motor_sign +1 (compiled defaults: the stored settings were unreadable)" \
+        in r.stdout
+
+
+def test_signs_change_only_while_disarmed_and_only_to_plus_or_minus_one():
+    from rodctl.link.session import Session
+    from rodgains.errors import UserError
+
+    with Session("sim://?theta0_deg=175") as s:
+        s.arm(1)  # balance: CATCH, then BALANCE
+        with pytest.raises(UserError, match="refused encoder_sign=-1 in mode"):
+            s.set("encoder_sign", -1.0)
+        s.disarm()
+        s.set("encoder_sign", -1.0)
+        assert s.request_hello().rig & 1  # ENCODER_REVERSED
+    r = run_rodctl("set", "--port", "sim://", "motor_sign=0", timeout=60)
+    assert r.returncode == 2 and "motor_sign=0 out of range: allowed motor_sign = 1 or -1" in r.stderr
