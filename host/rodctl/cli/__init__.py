@@ -12,7 +12,7 @@ from rodgains.errors import UserError
 from rodctl import __version__
 
 # Subcommand modules, each with register(subparsers); imported lazily-light so `rodctl gains` starts fast.
-COMMAND_MODULES = ["gains", "protocol", "docs", "sil", "status", "check", "record", "console", "simdevice", "logconvert", "plot", "scope", "flash", "sim", "bench", "robustness", "tune", "sweep", "identify"]
+COMMAND_MODULES = ["gains", "protocol", "docs", "sil", "status", "check", "record", "console", "simdevice", "logconvert", "plot", "scope", "flash", "sim", "bench", "robustness", "tune", "sweep", "identify", "track"]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -39,9 +39,10 @@ GOALS = {
     "matrix_runs_passing": (None, "", "runs", "robustness matrix on the faithful plant (docs/control.md)"),
     "matrix_runs": (None, "", "runs", "runs in the robustness matrix"),
     "backlash3_final_deg": (3.0, "<=", "deg", "3 deg of gearbox play: the larger final deviation of the two tasks"),
+    "track_720p_frames_per_s": (120.0, ">=", "frames/s", "`rodctl track`'s pass over a 720p video (decode, markers, repeats)"),
     "longest_rod_ratio": (1.3, ">=", "x L_crit", "longest rod held within 3 deg from 10 deg on the faithful plant, design redone per length"),
 }
-GROUPS = ("gains", "m4", "sil", "host", "robust", "control")
+GROUPS = ("gains", "m4", "sil", "host", "robust", "control", "track")
 
 
 def _gains_seconds(edges: int, repeats: int = 3) -> float:
@@ -90,6 +91,10 @@ def measure(groups: set[str], quick: bool = False) -> dict:
         from rodctl.bench import control as bench_control
 
         out.update(bench_control.measure(quick=quick))
+    if "track" in groups:
+        from rodctl.bench import track as bench_track
+
+        out.update(bench_track.measure(quick=quick))
     if "host" in groups:
         from rodctl.bench.protocol import measure_decode_rate
 

@@ -1,0 +1,159 @@
+"""rodctl track: the rod a camera saw against the board's estimate (rodctl.track)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from rodgains.errors import InputError
+
+from rodctl.cli.outputs import check_output
+
+
+def _pair(text: str | None, what: str) -> tuple[float, float] | None:
+    if text is None:
+        return None
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError(f"{what} {text!r}: expected X,Y") from None
+    return x, y
+
+
+def _times(text: str | None) -> list[float] | None:
+    if not text:
+        return None
+    try:
+        return [float(v) for v in text.split(",")]
+    except ValueError:
+        raise InputError(f"--at {text!r}: times [s] on the log's clock, comma-separated") from None
+
+
+def run_track_command(args) -> int:
+    import numpy as np
+    from rodgains.params import load_params
+
+    from rodctl.track import track
+    from rodctl.track.compare import table_lines
+    from rodctl.track.markers import ColorRange
+    from rodctl.track.output import columns, write_mcap, write_parquet
+    from rodctl.track.shape import QUALITY_TEXT
+
+    # every input and output checked before the video is read
+    color = ColorRange.parse(args.color)
+    hub = _pair(args.hub, "--hub")
+    if args.scale is not None and not 0 < args.scale < 1:
+        raise InputError(f"--scale {args.scale:g}: metres per pixel, e.g. 0.0005 (a 155 mm rod across 310 px)")
+    if args.markers is not None and not 2 <= args.markers <= 64:
+        raise InputError(f"--markers {args.markers}: between 2 and 64 markers on the rod")
+    at = _times(args.at)
+    out = Path(args.out)
+    if out.suffix.lower() != ".parquet":
+        raise InputError(f"--out {out}: the tracked log is Parquet (.parquet); its MCAP goes beside it")
+    check_output(out, "--out")
+    if args.plot:
+        check_output(args.plot, "--plot")
+    if not Path(args.video).is_file():
+        raise InputError(f"video {args.video}: no such file")
+    if not Path(args.log).is_file():
+        raise InputError(f"--log {args.log}: no such file")
+    params = load_params(args.params, args.overrides) if (args.params or args.overrides) else None
+    view = None
+    if args.calibrate:
+        from rodctl.track.calibrate import View
+
+        try:
+            cols, rows = (int(v) for v in args.board.lower().split("x"))
+        except ValueError:
+            raise InputError(f"--board {args.board!r}: inner corners as COLSxROWS, e.g. 9x6") from None
+        view = View.from_checkerboard(args.calibrate, (cols, rows), args.square)
+        print(f"calibration: {args.calibrate}, reprojection {view.rms_px:.2f} px, k1 {view.dist.ravel()[0]:+.3f}")
+
+    bar = None
+    if not args.quiet:
+        from tqdm import tqdm
+
+        bar = tqdm(unit="frame", desc="track", file=sys.stderr, leave=False)
+
+    def progress(k, total):
+        if bar is not None:
+            if bar.total is None and total:
+                bar.total = total
+            bar.update(k - bar.n)
+
+    try:
+        r = track(args.video, args.log, params, markers=args.markers, color=color, hub=hub, scale=args.scale,
+                  view=view, progress=progress)
+    finally:
+        if bar is not None:
+            bar.close()
+    a = r.alignment
+    q = r.counts()
+    print(f"video: {r.frames} frames at {r.fps:g} fps; hub at ({r.hub_px[0]:.1f}, {r.hub_px[1]:.1f}) px, "
+          f"{r.m_per_px * 1e3:.4f} mm/px")
+    print(f"frames: {q['good']} {QUALITY_TEXT[0]}, {q['filled']} with {QUALITY_TEXT[1]}, {q['repeated']} "
+          f"{QUALITY_TEXT[3].replace('a ', '')}s, {q['unusable']} with {QUALITY_TEXT[2]}")
+    print(f"alignment: the video's first frame at {a.offset_s:.4f} s of the log, clock drift {a.drift_ppm:+.0f} ppm, "
+          f"base angle correlation {a.correlation:.4f}, residual {np.degrees(a.residual_rad):.2f} deg, "
+          f"camera minus encoder {np.degrees(a.angle_offset_rad):+.2f} deg")
+    print("estimate minus video, per edge:")
+    for line in table_lines(r.errors):
+        print("  " + line)
+
+    meta = {"video": args.video, "log": args.log, "fps": r.fps, "offset_s": a.offset_s, "drift_ppm": a.drift_ppm,
+            "correlation": a.correlation, "m_per_px": r.m_per_px, "hub_px": f"{r.hub_px[0]:.2f},{r.hub_px[1]:.2f}",
+            "quality": "0 every marker seen, 1 a marker filled in, 2 too few markers, 3 a repeated frame"}
+    cols = columns(r.time_s, r.video_time_s, r.theta, r.markers_m, r.quality)
+    write_parquet(out, cols, meta)
+    mcap = out.with_suffix(".mcap")
+    write_mcap(mcap, cols, meta)
+    written = [str(out), str(mcap)]
+    if args.plot:
+        from rodctl.track.figures import tracking_figure
+
+        length = float((params or load_params())["rod"]["length"])
+        t = r.time_s
+        ok = np.isfinite(r.theta).all(axis=1)
+        times = at or list(np.linspace(t[ok][0], t[ok][-1], 6)[1:-1])
+        fig = tracking_figure(t, r.theta, r.estimate, length, times,
+                              f"{Path(args.video).name} against {Path(args.log).name}")
+        fig.savefig(args.plot, dpi=110)
+        written.append(args.plot)
+    print(f"wrote {', '.join(written)}")
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "track", help="ground truth from video: the rod's markers against the board's estimate",
+        description="Find the rod's colored markers in every frame of VIDEO (OpenCV, streamed), take the hub from "
+                    "the marker that holds still on the motor axis, the scale from the rod's length (or --scale, "
+                    "or a checkerboard with --calibrate), align the video's clock with the telemetry LOG by the "
+                    "base angle both saw (offset and drift), and compare every edge's angle with the board's "
+                    "estimate. Writes a tracked log (Parquet, and MCAP beside it for Foxglove) on the log's clock, "
+                    "and a figure with --plot. How to film a run: docs/howto/film-a-run.md. Exit 2: bad input, "
+                    "a video without the markers, or a log of another run.")
+    p.add_argument("video", metavar="VIDEO", help="the video (any format OpenCV reads, e.g. MP4)")
+    p.add_argument("--log", required=True, metavar="LOG", help="the run's telemetry log (CSV, Parquet or MCAP)")
+    p.add_argument("--out", default="tracked.parquet", metavar="PATH",
+                   help="tracked log (default tracked.parquet; the MCAP goes beside it)")
+    p.add_argument("--plot", metavar="PNG", help="figure: shapes at --at times, and every edge's angle over time")
+    p.add_argument("--at", metavar="T1,T2,...", help="times [s, the log's clock] of the shape panels (default: 4 "
+                                                     "spread over the video)")
+    p.add_argument("--markers", type=int, metavar="N", help="markers on the rod besides the axis's, equally spaced, "
+                                                            "the last at the tip (default: the design's N)")
+    p.add_argument("--color", metavar="H1,S1,V1-H2,S2,V2",
+                   help="the markers' HSV range in OpenCV units (H 0..179; default pink 145,90,90-179,255,255)")
+    p.add_argument("--hub", metavar="X,Y", help="the motor axis in the image [px] (default: the marker that holds "
+                                                 "still)")
+    p.add_argument("--scale", type=float, metavar="M_PER_PX", help="metres per pixel (default: from the rod's "
+                                                                    "length)")
+    p.add_argument("--calibrate", metavar="IMAGE", help="a checkerboard held level in the rod's plane: removes the "
+                                                        "lens distortion and the tilt, and gives the scale")
+    p.add_argument("--board", default="9x6", metavar="COLSxROWS", help="the checkerboard's inner corners (default 9x6)")
+    p.add_argument("--square", type=float, default=0.02, metavar="M", help="its square side [m] (default 0.02)")
+    p.add_argument("--params", metavar="FILE", help="the rod's parameter file (default: the log's parameters)")
+    p.add_argument("--set", metavar="SECTION.KEY=VALUE", action="append", default=[], dest="overrides",
+                   help="override one parameter (repeatable)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_track_command)

@@ -1,0 +1,97 @@
+"""The video's clock against the telemetry log's: offset and rate from the base angle both saw.
+
+    log time = offset + rate * video time
+
+found by the normalized cross-correlation of the camera's base angle (the first edge) with the
+encoder's, then a least-squares fit of offset, rate and a constant angle (the camera's roll and
+the encoder's zero) on the log's samples, interpolated. Refused when the best correlation is too
+weak to trust: the video and the log are not of the same run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rodgains.errors import InputError
+
+MIN_CORRELATION = 0.9  # the fitted base angles must agree this well [-]
+MIN_OVERLAP = 0.5  # share of the video the log must cover at the best lag [-]
+MIN_SWING_DEG = 5.0  # the base must move this much in the video to time it
+MAX_DRIFT_PPM = 5000.0  # camera clocks are good to a few hundred ppm; beyond this the fit is lost
+
+
+@dataclass
+class Alignment:
+    offset_s: float  # the log's time of the video's first frame [s]
+    rate: float  # log seconds per video second [-]
+    angle_offset_rad: float  # camera base angle minus encoder angle, constant part [rad]
+    correlation: float  # Pearson r of the fitted base angles [-]
+    residual_rad: float  # RMS of the fit [rad]
+
+    @property
+    def drift_ppm(self) -> float:
+        return (self.rate - 1.0) * 1e6
+
+    def log_time(self, video_t: np.ndarray) -> np.ndarray:
+        return self.offset_s + self.rate * np.asarray(video_t)
+
+
+def _coarse(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarray, dt: float) -> tuple[float, float]:
+    """(offset [s], r) of the best normalized cross-correlation on a common grid of step dt."""
+    x = np.interp(np.arange(tau[0], tau[-1], dt), tau, beta)
+    grid = np.arange(t_log[0], t_log[-1], dt)
+    y = np.interp(grid, t_log, th_log)
+    n, m = len(x), len(y)
+    need = int(MIN_OVERLAP * n)
+    best_r, best_score, best_lag = -2.0, -2.0, 0
+    for lag in range(-(n - need), m - need + 1):  # video sample 0 at log sample `lag`
+        a, b = max(0, -lag), min(n, m - lag)
+        if b - a < need:
+            continue
+        xs, ys = x[a:b], y[a + lag:b + lag]
+        xs = xs - xs.mean()
+        ys = ys - ys.mean()
+        den = np.sqrt(np.dot(xs, xs) * np.dot(ys, ys))
+        r = float(np.dot(xs, ys) / den) if den > 0 else 0.0
+        # a swinging rod is periodic: of two lags that fit alike, the one the log covers wins
+        score = r * (b - a) / n
+        if score > best_score:
+            best_r, best_score, best_lag = r, score, lag
+    return grid[0] + best_lag * dt - tau[0], best_r
+
+
+def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarray, fps: float) -> Alignment:
+    """tau: video times of the usable frames [s]; beta: the rod's base angle in them [rad] (unwrapped;
+    rodctl.track.shape.base_tangent); t_log, th_log: the log's time [s] and encoder angle [rad]."""
+    from scipy.optimize import least_squares
+
+    if len(tau) < 20:
+        raise InputError(f"only {len(tau)} usable frames: too few to align the video with the log")
+    if np.ptp(beta) < np.radians(MIN_SWING_DEG):
+        raise InputError(f"the rod's base moves {np.degrees(np.ptp(beta)):.1f} deg in the video: too little to "
+                         "align it with the log (swing the rod by hand at the start of the run)")
+    offset0, r0 = _coarse(tau, beta, t_log, th_log, 1.0 / fps)
+    if r0 < MIN_CORRELATION:
+        raise InputError(f"the video's base angle does not follow the log's (best correlation {r0:.2f} < "
+                         f"{MIN_CORRELATION}): a log of another run?")
+
+    def resid(p):
+        return beta - p[2] - np.interp(p[0] + p[1] * tau, t_log, th_log)
+
+    c0 = float(np.median(beta - np.interp(offset0 + tau, t_log, th_log)))
+    span = 3.0 / fps  # the coarse lag is right to a frame; the rate within MAX_DRIFT_PPM
+    fit_bounds = ([offset0 - span, 1.0 - MAX_DRIFT_PPM * 1e-6, -np.inf],
+                  [offset0 + span, 1.0 + MAX_DRIFT_PPM * 1e-6, np.inf])
+    fit = least_squares(resid, [offset0, 1.0, c0], x_scale=[1.0 / fps, 1e-4, 0.01], loss="soft_l1",
+                        f_scale=np.radians(2.0), bounds=fit_bounds)
+    off, rate, c = (float(v) for v in fit.x)
+    inside = (off + rate * tau >= t_log[0]) & (off + rate * tau <= t_log[-1])
+    model = np.interp(off + rate * tau[inside], t_log, th_log) + c
+    r = float(np.corrcoef(beta[inside], model)[0, 1]) if inside.sum() > 2 else 0.0
+    if r < MIN_CORRELATION:
+        raise InputError(f"the video's base angle does not follow the log's (correlation {r:.2f} < "
+                         f"{MIN_CORRELATION}): a log of another run?")
+    res = float(np.sqrt(np.mean((beta[inside] - model) ** 2)))
+    return Alignment(off, rate, c, r, res)

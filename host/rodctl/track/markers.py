@@ -1,0 +1,65 @@
+"""The rod's colored markers in one frame: an HSV range, OpenCV's thresholding and its connected
+components (no home-made blob detector)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rodgains.errors import InputError
+
+# The paper's rig carries pink dots: OpenCV hue (0..179) about 150 to 178, well saturated, not dark.
+DEFAULT_HSV = ((145, 90, 90), (179, 255, 255))
+
+
+@dataclass(frozen=True)
+class ColorRange:
+    lo: tuple[int, int, int]
+    hi: tuple[int, int, int]
+
+    @classmethod
+    def parse(cls, text: str | None) -> "ColorRange":
+        """'H1,S1,V1-H2,S2,V2' (OpenCV units: H 0..179, S and V 0..255); None: the default pink."""
+        if not text:
+            return cls(*DEFAULT_HSV)
+        try:
+            lo_t, hi_t = text.split("-")
+            lo = tuple(int(v) for v in lo_t.split(","))
+            hi = tuple(int(v) for v in hi_t.split(","))
+        except ValueError:
+            raise InputError(f"--color {text!r}: expected H1,S1,V1-H2,S2,V2, e.g. 145,90,90-179,255,255") from None
+        if len(lo) != 3 or len(hi) != 3:
+            raise InputError(f"--color {text!r}: three numbers on each side (H,S,V)")
+        for name, v, top in zip("HSV", zip(lo, hi), (179, 255, 255)):
+            if not (0 <= v[0] <= v[1] <= top):
+                raise InputError(f"--color {text!r}: {name} must be 0 <= low <= high <= {top}")
+        return cls(lo, hi)
+
+
+class Detector:
+    """Marker centroids [px] in BGR frames, sub-pixel (the blob's intensity-weighted mean)."""
+
+    MIN_AREA_PX = 6  # smaller blobs are noise
+
+    def __init__(self, color: ColorRange, max_area_px: float = 5000.0):
+        import cv2
+
+        self.cv2 = cv2
+        self.lo = np.array(color.lo, np.uint8)
+        self.hi = np.array(color.hi, np.uint8)
+        self.max_area = max_area_px
+        self.kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
+
+    def __call__(self, frame: np.ndarray) -> np.ndarray:
+        """(n, 3): centroid x, y [px] and area [px] of each blob."""
+        cv2 = self.cv2
+        hsv = cv2.cvtColor(frame, cv2.COLOR_BGR2HSV)
+        mask = cv2.inRange(hsv, self.lo, self.hi)
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self.kernel)
+        n, _, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        if n <= 1:
+            return np.zeros((0, 3))
+        area = stats[1:, cv2.CC_STAT_AREA]
+        keep = (area >= self.MIN_AREA_PX) & (area <= self.max_area)
+        return np.column_stack([centroids[1:][keep], area[keep]]).astype(float)
