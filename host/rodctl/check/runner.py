@@ -19,7 +19,7 @@ def run_check(session, params, label: str, user, *, say: Callable[[str], None] =
     left DISARMED (the session disarms on close as always)."""
     ctx = Context(session, params, label, user, say=say, flash_hint=flash_hint)
     rep = Report(port=session.port, params=label)
-    for _, step in STEPS:
+    for step in STEPS:
         report(rep.add(step(ctx)))
     rep.fixes = sign_fixes(ctx)
     return rep

@@ -44,7 +44,7 @@ class Context:
         self.say = say
         self.flash_hint = flash_hint
         self.cpr = counts_per_rev(params)
-        self.rest: dict | None = None  # the loop step's recording of the rod at rest
+        self.rest: dict | None = None  # the loop step's recording of the rod at rest (the encoder step reads it)
         self.encoder_reversed: bool | None = None  # from the hand step; None: not measured
         self.motor_reversed: bool | None = None  # from the pulses, once the encoder's sign is known
 
@@ -55,9 +55,7 @@ class Context:
         return self.session.wait_telemetry(timeout=2.0)
 
     def driver_faulted(self) -> bool:
-        t = self.telemetry()
-        return bool(int(t.flags) & int(P.TelemetryFlag.NFAULT_LOW)) or (
-            t.mode == P.Mode.FAULT and t.reason == P.Reason.DRIVER_FAULT)
+        return _driver_fault(self.telemetry())
 
     def ensure_disarmed(self) -> None:
         """Leave FAULT (other than the driver's own) so IDENTIFY may start."""
@@ -128,11 +126,17 @@ def loop(ctx: Context) -> Result:
 
 # ---- driver -----------------------------------------------------------------------------------
 
+def _driver_fault(t) -> bool:
+    """nFAULT low now, or the board latched a driver fault."""
+    return bool(int(t.flags) & int(P.TelemetryFlag.NFAULT_LOW)) or (
+        t.mode == P.Mode.FAULT and t.reason == P.Reason.DRIVER_FAULT)
+
+
 def driver(ctx: Context) -> Result:
     t = ctx.telemetry()
-    low = bool(int(t.flags) & int(P.TelemetryFlag.NFAULT_LOW))
-    values = {"nfault_low": low, "mode": name_of(P.Mode, t.mode), "reason": name_of(P.Reason, t.reason)}
-    if low or (t.mode == P.Mode.FAULT and t.reason == P.Reason.DRIVER_FAULT):
+    values = {"nfault_low": bool(int(t.flags) & int(P.TelemetryFlag.NFAULT_LOW)), "mode": name_of(P.Mode, t.mode),
+              "reason": name_of(P.Reason, t.reason)}
+    if _driver_fault(t):
         return Result("driver", FAIL, "nFAULT is low: the MAX14870 reports a fault and the board keeps the motor off",
                       "check the motor supply (VM, 4.5 to 36 V) and that the motor leads do not short, "
                       "and nFAULT's wire to pin 8 (docs/wiring.md)", values)
@@ -144,8 +148,7 @@ def driver(ctx: Context) -> Result:
 def encoder(ctx: Context) -> Result:
     """At rest (from the loop step's recording): still, and hanging at its zero. Then a hand's quarter
     turn counter-clockwise: counts change, rise, and by about a quarter turn."""
-    rest = ctx.rest if ctx.rest is not None else _record(ctx, 1.0)
-    counts = rest["count"].astype(int)
+    counts = ctx.rest["count"].astype(int)
     spread = int(counts.max() - counts.min()) if counts.size else 0
     hang = int(np.median(counts)) if counts.size else 0
     values = {"rest_spread_counts": spread, "hanging_count": hang, "hanging_deg": ctx.deg(hang)}
@@ -194,12 +197,6 @@ def _turn_done(rows, hang: int, cpr: float) -> bool:
     dev = np.asarray([r[4] for r in rows]) - hang
     out = np.max(np.abs(dev)) * 360.0 / cpr
     return out >= 20.0 and abs(dev[-1]) * 360.0 / cpr <= 5.0
-
-
-def _record(ctx: Context, seconds: float) -> dict:
-    with Recording(ctx.session) as rec:
-        rec.wait(seconds)
-    return rec.arrays()
 
 
 # ---- motor ------------------------------------------------------------------------------------
@@ -321,8 +318,7 @@ def heartbeat(ctx: Context) -> Result:
     _wait_still(ctx)
     ctx.say(f"heartbeat: the host falls silent for up to {2 * timeout + 1:g} s (zero torque, driver enabled)")
     with s.heartbeat_paused(), Recording(s) as rec:
-        ack = s.command(hold.command(), what="identify (heartbeat hold)")
-        start = ack
+        s.command(hold.command(), what="identify (heartbeat hold)")
         rec.wait(2 * timeout + 1.0, until=lambda rows: rows and rows[-1][1] == P.Mode.FAULT)
     a = rec.arrays()
     values = {"heartbeat_timeout_s": timeout}
@@ -336,7 +332,7 @@ def heartbeat(ctx: Context) -> Result:
                       "the firmware does not watch the host: reflash it (`rodctl flash`)", values)
     k = int(fault[0])
     # the hold started (heartbeat counted) one period before its first IDENTIFY frame
-    t_trip = (int(a["time_us"][k]) - int(a["time_us"][armed[0]])) % (1 << 32) * 1e-6 + period
+    t_trip = float(a["t_s"][k] - a["t_s"][armed[0]]) + period
     reason = int(a["reason"][k])
     enabled = bool(np.any(a["flags"][armed].astype(int) & int(P.TelemetryFlag.DRIVER_ENABLED)))
     values.update(trip_s=t_trip, reason=name_of(P.Reason, reason), driver_enabled=enabled)
@@ -352,5 +348,4 @@ def heartbeat(ctx: Context) -> Result:
     return Result("heartbeat", PASS, seen, values=values)
 
 
-STEPS = (("identity", identity), ("loop", loop), ("driver", driver), ("encoder", encoder), ("motor", motor),
-         ("heartbeat", heartbeat))
+STEPS = (identity, loop, driver, encoder, motor, heartbeat)  # in order: encoder reads loop's recording

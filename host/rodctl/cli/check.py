@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import json
-import os
 import sys
-import tempfile
-from pathlib import Path
+
+from rodgains.atomic_file import atomic_write
 
 from rodctl.cli.common import add_design_args, add_port_arg, session_for, stop_signals
 from rodctl.cli.outputs import check_output
@@ -22,20 +21,6 @@ def _design(args):
     over = "".join(f" --set {o}" for o in args.overrides)
     flash = f"rodctl flash{f' --params {args.params}' if args.params else ''}{over}"
     return params, label + over, flash
-
-
-def _write_json(path: str, data: dict) -> None:
-    """Whole or not at all: a temporary file beside it, renamed."""
-    folder = Path(path).resolve().parent
-    fd, tmp = tempfile.mkstemp(prefix=".check-", suffix=".json", dir=folder)
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f, indent=1)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def _fix(session, report, yes: bool) -> None:
@@ -62,7 +47,7 @@ def _fix(session, report, yes: bool) -> None:
 
 def run_check_command(args) -> int:
     from rodctl.check import run_check
-    from rodctl.check.user import user_for
+    from rodctl.check.user import VirtualHand, user_for
 
     if args.json:
         check_output(args.json, "--json")
@@ -72,7 +57,7 @@ def run_check_command(args) -> int:
     try:
         with stop_signals(), session_for(args) as s:
             user = user_for(s, args.yes)
-            if type(user).__name__ == "VirtualHand":
+            if isinstance(user, VirtualHand):
                 say("sim://: the virtual board's hand turns the rod when a step asks for a hand")
             report = run_check(s, params, label, user, say=say, report=show, flash_hint=flash)
             if args.fix:
@@ -82,7 +67,7 @@ def run_check_command(args) -> int:
         return 130
     print(report.summary())
     if args.json:
-        _write_json(args.json, report.to_json())
+        atomic_write(args.json, json.dumps(report.to_json(), indent=1) + "\n")  # whole or not at all
     return 0 if report.passed else 1
 
 

@@ -119,8 +119,9 @@ class VirtualDevice:
         # header=stale: the board runs firmware designed from other parameters than these
         built = self.params
         if self.faults.header_stale:
-            e = float(self.params[STALE_OVERRIDE_KEY.split(".")[0]][STALE_OVERRIDE_KEY.split(".")[1]])
-            built = self.params.with_overrides(f"{STALE_OVERRIDE_KEY}={e * STALE_FACTOR!r}")
+            section, key = STALE_OVERRIDE_KEY.split(".")
+            stale = float(self.params[section][key]) * STALE_FACTOR
+            built = self.params.with_overrides(f"{STALE_OVERRIDE_KEY}={stale!r}")
         self.lib_path = build_sil(built)
         # plant_params (sim://?plant=FILE.toml): the rod the board really drives, which the firmware's
         # parameters only estimate (what `rodctl identify` must recover). Its [plant] table is the model.
@@ -161,7 +162,6 @@ class VirtualDevice:
             cpr = f.counts_per_rev or self._nominal_cpr
             self._boot_offset = int(round(f.boot_angle_deg / 360.0 * cpr))
         self._hand: Hand | None = None
-        self._hand_done = 0  # hand turns finished (read by other threads)
 
     @classmethod
     def from_options(cls, *, plant: str | None = None, edges: int | str | None = None,
@@ -212,10 +212,6 @@ class VirtualDevice:
         over `seconds`, then lets go. Safe to call from another thread: the runner picks it up."""
         self._hand = Hand(peak_deg, seconds)
 
-    @property
-    def hand_turns_done(self) -> int:
-        return self._hand_done
-
     def _encoder_count(self) -> int:
         """The count the board's quadrature decoder holds, faults included."""
         f = self.faults
@@ -224,8 +220,7 @@ class VirtualDevice:
         raw = self.plant.encoder()
         if self._count_scale != 1.0:
             raw = int(round(raw * self._count_scale))
-        raw *= f.encoder_sign * (-1 if f.ab_swapped else 1)
-        return raw - self._boot_offset * f.encoder_sign * (-1 if f.ab_swapped else 1)
+        return f.count_sign * (raw - self._boot_offset)
 
     def step(self) -> None:
         lib, plant, f = self.lib, self.plant, self.faults
@@ -235,7 +230,6 @@ class VirtualDevice:
             tq = hand.torque(self.time, float(th[0]), float(dth[0]))
             if tq is None:
                 self._hand = None
-                self._hand_done += 1
                 tq = 0.0
             plant.external_torque = tq
         count = self._encoder_count()

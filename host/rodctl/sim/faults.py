@@ -78,6 +78,11 @@ class Faults:
         return cls(**kw)
 
     @property
+    def count_sign(self) -> int:
+        """The sign the wiring puts on the count (A and B swapped reverse it just as the sign does)."""
+        return self.encoder_sign * (-1 if self.ab_swapped else 1)
+
+    @property
     def any(self) -> bool:
         return self != Faults(hand=self.hand)
 

@@ -39,27 +39,32 @@ class Alignment:
 
 
 def _coarse(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarray, dt: float) -> tuple[float, float]:
-    """(offset [s], r) of the best normalized cross-correlation on a common grid of step dt."""
+    """(offset [s], r) of the best normalized cross-correlation on a common grid of step dt.
+
+    Every lag at once: the products' sums from one FFT correlation, the overlaps' sums and sums of
+    squares from running sums, so a long video against a long log costs O((n + m) log(n + m))."""
+    from scipy.signal import correlate
+
     x = np.interp(np.arange(tau[0], tau[-1], dt), tau, beta)
     grid = np.arange(t_log[0], t_log[-1], dt)
     y = np.interp(grid, t_log, th_log)
     n, m = len(x), len(y)
     need = int(MIN_OVERLAP * n)
-    best_r, best_score, best_lag = -2.0, -2.0, 0
-    for lag in range(-(n - need), m - need + 1):  # video sample 0 at log sample `lag`
-        a, b = max(0, -lag), min(n, m - lag)
-        if b - a < need:
-            continue
-        xs, ys = x[a:b], y[a + lag:b + lag]
-        xs = xs - xs.mean()
-        ys = ys - ys.mean()
-        den = np.sqrt(np.dot(xs, xs) * np.dot(ys, ys))
-        r = float(np.dot(xs, ys) / den) if den > 0 else 0.0
-        # a swinging rod is periodic: of two lags that fit alike, the one the log covers wins
-        score = r * (b - a) / n
-        if score > best_score:
-            best_r, best_score, best_lag = r, score, lag
-    return grid[0] + best_lag * dt - tau[0], best_r
+    lags = np.arange(-(n - need), m - need + 1)  # video sample 0 at log sample `lag`
+    a, b = np.maximum(0, -lags), np.minimum(n, m - lags)
+    k = b - a
+    sxy = correlate(y, x, mode="full", method="fft")[lags + n - 1]
+    px, pxx = np.concatenate([[0.0], np.cumsum(x)]), np.concatenate([[0.0], np.cumsum(x * x)])
+    py, pyy = np.concatenate([[0.0], np.cumsum(y)]), np.concatenate([[0.0], np.cumsum(y * y)])
+    sx, sxx = px[b] - px[a], pxx[b] - pxx[a]
+    sy, syy = py[b + lags] - py[a + lags], pyy[b + lags] - pyy[a + lags]
+    cov = sxy - sx * sy / k
+    den = np.sqrt(np.maximum(sxx - sx * sx / k, 0.0) * np.maximum(syy - sy * sy / k, 0.0))
+    r = np.divide(cov, den, out=np.zeros_like(cov), where=den > 0)
+    # a swinging rod is periodic: of two lags that fit alike, the one the log covers wins
+    score = np.where(k >= need, r * k / n, -np.inf)
+    best = int(np.argmax(score))
+    return grid[0] + lags[best] * dt - tau[0], float(r[best])
 
 
 def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarray, fps: float) -> Alignment:

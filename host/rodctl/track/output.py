@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
+from rodgains.atomic_file import replacing
 
 
 def columns(t: np.ndarray, tau: np.ndarray, theta: np.ndarray, markers_m: np.ndarray, quality: np.ndarray) -> dict:
@@ -20,24 +19,13 @@ def columns(t: np.ndarray, tau: np.ndarray, theta: np.ndarray, markers_m: np.nda
     return cols
 
 
-def _replace(path: Path, write) -> None:
-    """Whole or not at all: written beside, then renamed."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.resolve().parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def write_parquet(path: Path, cols: dict, meta: dict) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     table = pa.table(cols).replace_schema_metadata({k: str(v) for k, v in meta.items()})
-    _replace(path, lambda tmp: pq.write_table(table, tmp))
+    with replacing(path) as tmp:
+        pq.write_table(table, tmp)
 
 
 def write_mcap(path: Path, cols: dict, meta: dict) -> None:
@@ -48,22 +36,19 @@ def write_mcap(path: Path, cols: dict, meta: dict) -> None:
     schema = {"type": "object", "properties": {"time_s": {"type": "number"}, "quality": {"type": "integer"},
                                                "theta_rad": {"type": "array", "items": {"type": "number"}}}}
 
-    def write(tmp):
-        with open(tmp, "wb") as f:
-            w = Writer(f)
-            w.start(profile="", library="rodctl track")
-            sid = w.register_schema(name="rod.Tracked", encoding="jsonschema", data=json.dumps(schema).encode())
-            cid = w.register_channel(topic="/rod/tracked", message_encoding="json", schema_id=sid)
-            w.add_metadata("rodctl.track", {k: str(v) for k, v in meta.items()})
-            for k in range(len(cols["time_s"])):
-                t = float(cols["time_s"][k])
-                if not np.isfinite(t) or t < 0:
-                    continue
-                th = [float(cols[c][k]) for c in theta_keys]
-                msg = {"time_s": t, "quality": int(cols["quality"][k]),
-                       "theta_rad": [v if np.isfinite(v) else None for v in th]}
-                ns = int(round(t * 1e9))
-                w.add_message(cid, log_time=ns, publish_time=ns, data=json.dumps(msg).encode(), sequence=k)
-            w.finish()
-
-    _replace(path, write)
+    with replacing(path) as tmp, open(tmp, "wb") as f:
+        w = Writer(f)
+        w.start(profile="", library="rodctl track")
+        sid = w.register_schema(name="rod.Tracked", encoding="jsonschema", data=json.dumps(schema).encode())
+        cid = w.register_channel(topic="/rod/tracked", message_encoding="json", schema_id=sid)
+        w.add_metadata("rodctl.track", {k: str(v) for k, v in meta.items()})
+        for k in range(len(cols["time_s"])):
+            t = float(cols["time_s"][k])
+            if not np.isfinite(t) or t < 0:
+                continue
+            th = [float(cols[c][k]) for c in theta_keys]
+            msg = {"time_s": t, "quality": int(cols["quality"][k]),
+                   "theta_rad": [v if np.isfinite(v) else None for v in th]}
+            ns = int(round(t * 1e9))
+            w.add_message(cid, log_time=ns, publish_time=ns, data=json.dumps(msg).encode(), sequence=k)
+        w.finish()
