@@ -103,6 +103,17 @@ def test_repeated_frames_and_a_covered_marker_are_flagged(filmed, tracked):
     assert np.all(np.isfinite(r.theta[a:b]))
 
 
+def test_frames_outside_the_log_keep_their_angles_and_the_rest_take_the_estimates_turn():
+    from rodctl.track.compare import on_branch
+
+    tracked = np.array([[0.1, 0.2], [3.0, 3.1], [0.5, np.nan]])
+    estimate = np.array([[np.nan, np.nan], [3.0 - 2 * np.pi, 3.2 - 2 * np.pi], [0.4, 0.4]])
+    out = on_branch(tracked, estimate)
+    assert out[0] == pytest.approx([0.1, 0.2])  # before the log began: as the camera saw them
+    assert out[1] == pytest.approx([3.0 - 2 * np.pi, 3.1 - 2 * np.pi])  # one turn down, as the board counts
+    assert out[2, 0] == pytest.approx(0.5) and np.isnan(out[2, 1])  # no marker: still no angle
+
+
 def test_the_command_writes_parquet_mcap_and_the_figure(filmed, tmp_path):
     import pandas as pd
     from mcap.reader import make_reader

@@ -19,7 +19,7 @@ import numpy as np
 from rodgains.errors import InputError
 
 from rodctl.track.align import Alignment, align
-from rodctl.track.compare import error_table, estimate_at, settle_time
+from rodctl.track.compare import error_table, estimate_at, on_branch, settle_time
 from rodctl.track.markers import ColorRange, Detector
 from rodctl.track.shape import (FILLED, GOOD, REPEATED, UNUSABLE, base_tangent, edge_angles, find_hub, place, rod_length_px,
                                 rod_markers, to_world)
@@ -174,9 +174,7 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     theta_hat = np.column_stack([np.asarray(data[f"theta_hat_{i + 1}_rad"], float) for i in range(n_edges)])
     est = estimate_at(t, t_log, theta_hat)
     settled = settle_time(t_log, np.asarray(data["mode_code"]))
-    tracked = np.where(ok[:, None], theta, np.nan)
-    # compare on one branch: the estimate's turn count is the board's, the video's is the camera's
-    tracked = tracked + 2 * np.pi * np.round((est - tracked) / (2 * np.pi))
+    tracked = on_branch(np.where(ok[:, None], theta, np.nan), est)
     errors = error_table(t, tracked, est, settled)
     return Tracked(str(video_path), video.fps, F, hub_px, m_per_px, tau, t, tracked, markers_m, quality, al, est,
                    errors, settled)

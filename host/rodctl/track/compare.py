@@ -12,6 +12,13 @@ def wrap(a: np.ndarray) -> np.ndarray:
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
 
+def on_branch(tracked: np.ndarray, estimate: np.ndarray) -> np.ndarray:
+    """The tracked angles moved by whole turns onto the estimate's branch (the board counts its own turns,
+    the camera its own); where there is no estimate (a frame outside the log) they stay as they are."""
+    turns = np.round((estimate - tracked) / (2 * np.pi))
+    return tracked + 2 * np.pi * np.where(np.isfinite(turns), turns, 0.0)
+
+
 def estimate_at(t: np.ndarray, t_log: np.ndarray, theta_hat: np.ndarray) -> np.ndarray:
     """The log's theta_hat (absolute, pi upright) at times t, per edge; NaN outside the log."""
     out = np.column_stack([np.interp(t, t_log, theta_hat[:, i], left=np.nan, right=np.nan)
