@@ -100,9 +100,9 @@ def test_a_reversed_encoder_alone_leaves_the_motor_passing():
 def test_a_wrong_gear_ratio_shows_in_the_motor_gain_too():
     r, lines = check("sim://?counts_per_rev=2937.6")
     # the hand turns the rod's side of the gearbox; the encoder on the motor side reads the turn to within
-    # the 1 deg of play, so three times the counts reads as 3.0 or 3.1 quarter turns
+    # the 1 deg of play, so three times the counts reads as 3.0 or 3.1 quarter turns (printed to 0.1)
     factor = float(lines["encoder"].split(" x a quarter turn")[0].rsplit(", ", 1)[1])
-    assert factor == pytest.approx(3.0, abs=0.1), lines["encoder"]
+    assert factor in (3.0, 3.1), lines["encoder"]
     assert lines["motor"].startswith("FAIL") and "more motion than the model: check motor.torque_constant" \
         in lines["motor"]
 

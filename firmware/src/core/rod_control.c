@@ -297,13 +297,14 @@ void rod_control_step(rod_control_t *c, const rod_inputs_t *in, uint32_t heartbe
         drive = rod_motor_drive(request + friction, c->rate);
         bool estimate_ok = c->mode != ROD_MODE_BALANCE || c->obs.finite;
         bool closed_loop = c->mode == ROD_MODE_BALANCE || c->mode == ROD_MODE_SWING_UP;
+        uint8_t stop = ROD_REASON_NONE;
         if (!estimate_ok || !isfinite(drive.torque) || !isfinite(drive.duty)) {
-            trip(c, ROD_REASON_NON_FINITE);
-            driving = false;
-            drive.duty = 0.0f;
-            drive.torque = 0.0f;
+            stop = ROD_REASON_NON_FINITE;
         } else if (closed_loop && rod_runaway_step(&c->runaway, drive.torque, c->rate)) {
-            trip(c, ROD_REASON_RUNAWAY);
+            stop = ROD_REASON_RUNAWAY;
+        }
+        if (stop != ROD_REASON_NONE) {
+            trip(c, stop);
             driving = false;
             drive.duty = 0.0f;
             drive.torque = 0.0f;
