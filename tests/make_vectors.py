@@ -57,7 +57,7 @@ def ref_cobs(data: bytes) -> bytes:
     return bytes(out)
 
 
-TYPES = {"TELEMETRY": 0x01, "HELLO": 0x02, "ACK": 0x03, "HEARTBEAT": 0x10, "ARM": 0x11, "DISARM": 0x12,
+TYPES = {"TELEMETRY": 0x01, "HELLO": 0x02, "ACK": 0x03, "IMU": 0x04, "HEARTBEAT": 0x10, "ARM": 0x11, "DISARM": 0x12,
          "CLEAR_FAULT": 0x13, "SET": 0x14, "HELLO_REQUEST": 0x15, "IDENTIFY": 0x16,
          "SAVE_RIG": 0x17}
 
@@ -76,6 +76,9 @@ def ref_payload(name: str, f: dict) -> bytes:
                            f["torque_max"], bytes.fromhex(f["header_sha256"]))
     if name == "ACK":
         return struct.pack("<BBIBB", f["command"], f["result"], f["command_seq"], f["mode"], 0)
+    if name == "IMU":
+        return struct.pack("<fffffBBH", f["gyro"], f["accel_x"], f["accel_y"], f["gyro_bias"], f["encoder_offset"],
+                           f["status"], 0, f["bad_run"])
     if name == "ARM":
         return struct.pack("<B", f["mode"])
     if name == "SET":
@@ -167,6 +170,12 @@ def cases() -> list[dict]:
     add("ack_bad_state", "ACK", 1002, 123458000, {"command": 0x11, "result": 2, "command_seq": 0xFFFFFFFF, "mode": 3},
         "arm refused in FAULT")
     add("ack_unknown", "ACK", 7, 8, {"command": 0x7E, "result": 3, "command_seq": 9, "mode": 0}, "unknown command")
+    add("imu_balancing", "IMU", 1003, 123459000, {"gyro": f32(-0.0123), "accel_x": f32(9.7012), "accel_y": f32(0.1712),
+        "gyro_bias": f32(0.0087), "encoder_offset": f32(-0.0052), "status": 0x07, "bad_run": 0},
+        "a good sample while balancing; bias measured at rest")
+    add("imu_lost", "IMU", 1004, 123460000, {"gyro": f32(0.0), "accel_x": f32(0.0), "accel_y": f32(0.0),
+        "gyro_bias": f32(0.0), "encoder_offset": f32(0.0), "status": 0x00, "bad_run": 15},
+        "no sample for 15 periods: the FAULT IMU threshold")
     add("heartbeat", "HEARTBEAT", 43, 1000000, {}, "")
     add("arm_balance", "ARM", 44, 1000100, {"mode": 1}, "catch near upright")
     add("arm_swing_up", "ARM", 45, 1000200, {"mode": 2}, "swing up then balance")

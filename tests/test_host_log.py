@@ -17,7 +17,7 @@ from rodctl.logs import (LogWriter, columns, device_metadata, device_time_s, ide
                          read_log, simulator_metadata, theta_hat)
 from rodctl.logs.schema import DeviceClock, from_upright
 
-UNIT_SUFFIXES = ("_s", "_us", "_rad", "_rad_s", "_Nm", "_frac", "_count", "_code", "_name", "_bits", "_text")
+UNIT_SUFFIXES = ("_s", "_us", "_rad", "_rad_s", "_m_s2", "_Nm", "_frac", "_count", "_code", "_name", "_bits", "_text")
 FORMATS = ("csv", "parquet", "mcap")
 
 
@@ -81,7 +81,7 @@ def test_metadata_units_and_events_beside_the_csv(tmp_path):
     path = tmp_path / "run.csv"
     _write(path).close({"frames": 302})
     side = json.loads((tmp_path / "run.csv.json").read_text())
-    assert side["metadata"]["rodctl-log"] == "2" and side["metadata"]["params_sha256"] == load_params().sha256()
+    assert side["metadata"]["rodctl-log"] == "3" and side["metadata"]["params_sha256"] == load_params().sha256()
     assert side["columns"]["torque_Nm"]["unit"] == "N m" and side["trailer"]["frames"] == "302"
     log = read_log(path)
     ev = log.events
@@ -142,7 +142,7 @@ def test_mcap_holds_telemetry_events_and_the_rod_shape(tmp_path):
     assert len(shape["x_m"]) == 6 and shape["y_m"][0] == 0.0
     assert shape["y_m"][-1] == pytest.approx(5 * l, rel=1e-3)  # upright: the tip straight above the axis
     assert 14 <= len(topics["/rod_shape"]) <= 16  # one every 20 ms of device time over 0.3 s
-    assert meta["rodctl"]["rodctl-log"] == "2" and meta["rodctl_trailer"]["rows"] == "300"
+    assert meta["rodctl"]["rodctl-log"] == "3" and meta["rodctl_trailer"]["rows"] == "300"
 
 
 def test_a_csv_cut_mid_row_keeps_every_complete_row(tmp_path):

@@ -42,7 +42,8 @@ VIOLATIONS = {
                                                          ["safety.heartbeat_timeout=0.01"]],
 }
 # checks no parameter file can reach: the generator's own layout and the firmware's own constants
-NOT_FROM_PARAMETERS = ("ROD_GAINS_SCHEMA_VERSION", "lacks a macro", "ROD_NX must be", "ring sizes")
+NOT_FROM_PARAMETERS = ("ROD_GAINS_SCHEMA_VERSION", "lacks a macro", "ROD_NX must be", "ring sizes", "ROD_NY must be",
+                       "designed with the tip IMU but lacks")
 
 
 def _config_messages() -> list[str]:

@@ -52,6 +52,11 @@ class Ack(C.Structure):
     _fields_ = [("command", C.c_uint8), ("result", C.c_uint8), ("command_seq", C.c_uint32), ("mode", C.c_uint8)]
 
 
+class Imu(C.Structure):
+    _fields_ = [("gyro", C.c_float), ("accel_x", C.c_float), ("accel_y", C.c_float), ("gyro_bias", C.c_float),
+                ("encoder_offset", C.c_float), ("status", C.c_uint8), ("bad_run", C.c_uint16)]
+
+
 class Command(C.Structure):
     _fields_ = [("type", C.c_uint8), ("seq", C.c_uint32), ("time_us", C.c_uint32), ("status", C.c_uint8),
                 ("arm_mode", C.c_uint8), ("param", C.c_uint8), ("value", C.c_float),
@@ -83,9 +88,10 @@ def lib():
     L.rod_proto_encode_telemetry.argtypes = [C.POINTER(Telemetry), C.c_uint32, C.c_uint32, C.c_void_p, sz]
     L.rod_proto_encode_hello.argtypes = [C.POINTER(Hello), C.c_uint32, C.c_uint32, C.c_void_p, sz]
     L.rod_proto_encode_ack.argtypes = [C.POINTER(Ack), C.c_uint32, C.c_uint32, C.c_void_p, sz]
+    L.rod_proto_encode_imu.argtypes = [C.POINTER(Imu), C.c_uint32, C.c_uint32, C.c_void_p, sz]
     L.rod_proto_encode_command.argtypes = [C.POINTER(Command), C.c_void_p, sz]
     for f in (L.rod_proto_encode_telemetry, L.rod_proto_encode_hello, L.rod_proto_encode_ack,
-              L.rod_proto_encode_command):
+              L.rod_proto_encode_imu, L.rod_proto_encode_command):
         f.restype = sz
     L.rod_proto_rx_init.argtypes, L.rod_proto_rx_init.restype = [C.POINTER(Rx)], None
     L.rod_proto_rx_feed.argtypes = [C.POINTER(Rx), C.c_void_p, sz, C.POINTER(sz), C.POINTER(Command)]
@@ -95,6 +101,7 @@ def lib():
                                              C.POINTER(C.c_float), sz]
     L.rod_proto_decode_hello.argtypes = [C.POINTER(Packet), C.POINTER(Hello)]
     L.rod_proto_decode_ack.argtypes = [C.POINTER(Packet), C.POINTER(Ack)]
+    L.rod_proto_decode_imu.argtypes = [C.POINTER(Packet), C.POINTER(Imu)]
     L.rod_proto_decode_command.argtypes = [C.POINTER(Packet), C.POINTER(Command)]
     return L
 
@@ -115,6 +122,8 @@ def c_encode(lib, case, cap=None) -> bytes:
         k = lib.rod_proto_encode_hello(C.byref(m), case["seq"], case["time_us"], out, cap)
     elif t == P.MsgType.ACK:
         k = lib.rod_proto_encode_ack(C.byref(Ack(**f)), case["seq"], case["time_us"], out, cap)
+    elif t == P.MsgType.IMU:
+        k = lib.rod_proto_encode_imu(C.byref(Imu(**f)), case["seq"], case["time_us"], out, cap)
     else:
         m = Command(type=t, seq=case["seq"], time_us=case["time_us"], arm_mode=f.get("mode", 0),
                     param=f.get("param", 0), value=f.get("value", 0.0),
@@ -143,6 +152,10 @@ def c_decode(lib, wire: bytes):
         m = Ack()
         assert lib.rod_proto_decode_ack(C.byref(p), C.byref(m)) == 0
         d = {k: getattr(m, k) for k, _ in Ack._fields_}
+    elif p.type == P.MsgType.IMU:
+        m = Imu()
+        assert lib.rod_proto_decode_imu(C.byref(p), C.byref(m)) == 0
+        d = {k: getattr(m, k) for k, _ in Imu._fields_}
     else:
         m = Command()
         assert lib.rod_proto_decode_command(C.byref(p), C.byref(m)) == 0

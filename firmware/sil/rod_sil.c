@@ -21,6 +21,7 @@
 static rod_device_t sil;
 static rod_outputs_t sil_out;
 static uint32_t sil_now_us;
+static rod_imu_reading_t sil_imu; /* the next step's IMU sample (rod_sil_imu) */
 
 int rod_sil_abi_version(void)
 {
@@ -32,6 +33,12 @@ void rod_sil_reset(void)
     rod_device_init(&sil);
     sil_out = (rod_outputs_t){false, 0.0f, 0.0f};
     sil_now_us = 0;
+    sil_imu = (rod_imu_reading_t){0.0f, 0.0f, 0.0f, false};
+}
+
+void rod_sil_imu(float gyro, float accel_x, float accel_y, int fresh)
+{
+    sil_imu = (rod_imu_reading_t){gyro, accel_x, accel_y, fresh != 0};
 }
 
 float rod_sil_period(void)
@@ -71,7 +78,8 @@ void rod_sil_arm(int mode)
 
 float rod_sil_step(int32_t encoder_count)
 {
-    rod_inputs_t in = {encoder_count, sil_now_us, 0u, false};
+    rod_inputs_t in = {encoder_count, sil_now_us, 0u, false, sil_imu};
+    sil_imu.fresh = false; /* each sample is given once */
     rod_device_heartbeat(&sil);
     rod_device_step(&sil, &in, &sil_out);
     sil_now_us += ROD_LOOP_PERIOD_US;
@@ -145,6 +153,7 @@ void rod_sil_inject_nan(void)
 
 static rod_device_t vdev;
 static rod_outputs_t vdev_out;
+static rod_imu_reading_t vdev_imu;
 static uint8_t rx_buf[SIL_RX_CAPACITY];
 static size_t rx_len;
 static uint8_t tx_buf[SIL_TX_MAX];
@@ -174,6 +183,7 @@ void rod_dev_reset(size_t tx_capacity)
 {
     rod_device_init(&vdev);
     vdev_out = (rod_outputs_t){false, 0.0f, 0.0f};
+    vdev_imu = (rod_imu_reading_t){0.0f, 0.0f, 0.0f, false};
     rx_len = 0;
     tx_len = 0;
     tx_cap = tx_capacity == 0 ? SIL_TX_DEFAULT : (tx_capacity > SIL_TX_MAX ? SIL_TX_MAX : tx_capacity);
@@ -181,10 +191,16 @@ void rod_dev_reset(size_t tx_capacity)
 
 float rod_dev_step(int32_t encoder_count, uint32_t now_us, uint32_t last_step_us, int driver_fault)
 {
-    rod_inputs_t in = {encoder_count, now_us, last_step_us, driver_fault != 0};
+    rod_inputs_t in = {encoder_count, now_us, last_step_us, driver_fault != 0, vdev_imu};
+    vdev_imu.fresh = false;
     rod_device_step(&vdev, &in, &vdev_out);
     vdev_main_loop();
     return vdev_out.torque;
+}
+
+void rod_dev_imu(float gyro, float accel_x, float accel_y, int fresh)
+{
+    vdev_imu = (rod_imu_reading_t){gyro, accel_x, accel_y, fresh != 0};
 }
 
 float rod_dev_duty(void)

@@ -41,6 +41,9 @@ ROD_SIL_API int rod_sil_edges(void);                /* N of the controller's mod
 ROD_SIL_API void rod_sil_arm(int mode);
 /* One control period; returns the torque [N m] at the output shaft, held for the next period. */
 ROD_SIL_API float rod_sil_step(int32_t encoder_count);
+/* The tip IMU's sample for the next rod_sil_step only (sensor frame, rod_io.h): gyro [rad/s], accelerometer
+ * x and y [m/s^2]; fresh 0: none came. A firmware designed without the IMU ignores it. */
+ROD_SIL_API void rod_sil_imu(float gyro, float accel_x, float accel_y, int fresh);
 /* theta-hat_1..N then their rates, up to cap values; returns the mode code. Outside BALANCE
  * every entry is the measured theta_1 / base rate. */
 ROD_SIL_API int rod_sil_status(float *est, int cap);
@@ -77,6 +80,8 @@ ROD_SIL_API void rod_dev_reset(size_t tx_capacity);
 /* One period: now_us = step start [us], last_step_us = CPU time of the previous step [us],
  * driver_fault = nFAULT low. Returns the torque; the main loop (rx/tx) runs after it. */
 ROD_SIL_API float rod_dev_step(int32_t encoder_count, uint32_t now_us, uint32_t last_step_us, int driver_fault);
+/* The tip IMU's sample for the next rod_dev_step only (as rod_sil_imu). */
+ROD_SIL_API void rod_dev_imu(float gyro, float accel_x, float accel_y, int fresh);
 ROD_SIL_API float rod_dev_duty(void);
 ROD_SIL_API int rod_dev_enable(void);
 ROD_SIL_API int rod_dev_reason(void);

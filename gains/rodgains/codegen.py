@@ -16,7 +16,7 @@ from .design import Design
 from .trim import trim_gains
 
 # Bump when the macro set or its meaning changes; firmware/src/core/rod_config.h checks it.
-HEADER_SCHEMA_VERSION = 3
+HEADER_SCHEMA_VERSION = 4
 DEFAULT_HEADER = Path("firmware/include/rod_gains.h")
 
 
@@ -59,6 +59,29 @@ def pendulum_frequency(p) -> float:
     L = r["length"]
     w = math.sqrt(m * r["gravity"] * 0.5 * L / (p.design_base_inertia + m * L * L / 3.0))
     return max(w, 1e-3)  # no gravity: no pendulum; the firmware divides by it
+
+
+def _imu_tables(d: Design) -> list[str]:
+    """The tip IMU's estimator tables (rodgains.imu.ImuEstimator), none without it."""
+    im = d.imu
+    if im is None:
+        return []
+    return [
+        "",
+        f"/* The tip IMU (sensors.tip_imu): {im.delay} period(s) of read latency, {d.params['sensors']['imu_from_tip'] * 1e3:g} mm "
+        "from the tip. Extra states a = [encoder offset, gyro bias, readings in flight]. */",
+        f"#define ROD_IMU_NA {im.NA}",
+        f"#define ROD_IMU_DELAY_PERIODS {im.delay}",
+        f"#define ROD_IMU_L_INIT {_matrix(im.L)}",
+        f"#define ROD_IMU_LW_INIT {_vector(im.Lw)}",
+        f"#define ROD_IMU_LA_INIT {_matrix(im.La)}",
+        f"#define ROD_IMU_AZ_INIT {_matrix(im.AZ)}",
+        f"#define ROD_IMU_AA_INIT {_matrix(im.AA)}",
+        f"#define ROD_IMU_BA_INIT {_vector(im.BA)}",
+        f"#define ROD_IMU_CZ_INIT {_matrix(im.CZ)}",
+        f"#define ROD_IMU_CA_INIT {_matrix(im.CA)}",
+        f"#define ROD_IMU_DY_INIT {_vector(im.DY)}",
+    ]
 
 
 def header_text(d: Design, command: str) -> str:
@@ -117,6 +140,13 @@ def header_text(d: Design, command: str) -> str:
         ("ROD_TRIM_BAND_NM", f32(trim.band), "steady torque the trim leaves alone [N m]"),
         ("ROD_TRIM_GATE_RAD", f32(trim.gate), "trims only with every estimated angle within this of upright [rad]"),
         ("ROD_TRIM_MAX_RAD", f32(trim.limit), "|trim| ceiling [rad]"),
+        ("ROD_NY", str(3 if d.imu is not None else 1),
+         "measurements the estimator reads: theta_1, then the tip IMU's gyro and accelerometer y"),
+        ("ROD_IMU_GYRO_RANGE_RAD_S", f32(p["sensors"]["gyro_range"]), "the IMU's gyro full scale [rad/s]"),
+        ("ROD_IMU_ACCEL_RANGE_M_S2", f32(p["sensors"]["accel_range"]), "its accelerometer's [m/s^2]"),
+        ("ROD_IMU_TILT_COS", f32(math.cos(math.radians(p["sensors"]["imu_tilt_deg"]))),
+         f"the part's mounting tilt, {p['sensors']['imu_tilt_deg']:g} deg, turned back [-]"),
+        ("ROD_IMU_TILT_SIN", f32(math.sin(math.radians(p["sensors"]["imu_tilt_deg"]))), ""),
     ]
     width = max(len(n) for n, _, _ in macros) + 1
     lines = [
@@ -147,6 +177,7 @@ def header_text(d: Design, command: str) -> str:
         f"#define ROD_L_INIT {_vector(d.L)}",
         f"#define ROD_L_DISTURBANCE {f32(d.Lw)}  /* gain of the base-torque disturbance estimate w [N m/rad]; u = -K z - w */",
         f"#define ROD_W_DECAY {f32(d.w_decay)}  /* w_pred = this * w per period: a passing torque (1: a random walk) [-] */",
+        *_imu_tables(d),
         "",
         "#endif /* ROD_GAINS_H */",
         "",

@@ -17,6 +17,8 @@ import scipy.linalg as sla
 
 from . import sampled
 from .errors import DesignRefused
+from .imu import ImuEstimator, ImuSite
+from .imu import closed_loop as imu_closed_loop
 from .linearize import linearize_upright
 from .params import Params
 from .rod_model import RodModel
@@ -89,6 +91,7 @@ class Design:
     checks: dict = field(default_factory=dict)
     Lw: float = 0.0  # gain of the estimated base-torque disturbance w [N m/rad]; u = -K z - w
     w_decay: float = 1.0  # w_pred = w_decay w per period [-] (1: a random walk, < 1: a passing torque)
+    imu: ImuEstimator | None = None  # the tip IMU's states and gains (sensors.tip_imu); then L, Lw are its encoder column
 
     @property
     def N(self) -> int:
@@ -115,9 +118,22 @@ class Design:
             return self.Ad, self.Bd, self.C, self.K, self.L
         return self.observer_matrices()
 
+    def imu_loop(self, actuator_gain: complex = 1.0, Ad=None, Bd=None, delay: int = 0, C_imu=None,
+                 D_imu=None) -> np.ndarray:
+        """The sampled loop with the tip IMU: plant (Ad, Bd; default the design model) read by the encoder and
+        the IMU (C_imu, D_imu: the plant's IMU rows, default the design's) with the whole estimator."""
+        im = self.imu
+        Ao, Bo, Co, Do = im.full(self.Ad, self.Bd, self.w_decay)
+        Lo = np.vstack([im.L, im.Lw[None, :], im.La])
+        Ko = np.hstack([self.K, [[1.0]], np.zeros((1, im.NA))])
+        Ap, Bp, Cp, Dp = im.plant(self.Ad if Ad is None else Ad, self.Bd if Bd is None else Bd, C_imu, D_imu)
+        return imu_closed_loop(Ap, Bp, Cp, Dp, Ao, Bo, Co, Do, Ko, Lo, actuator_gain, delay)
+
     def loop(self, actuator_gain: complex = 1.0, Ad=None, Bd=None, delay: int = 0) -> np.ndarray:
         """The sampled loop: plant (Ad, Bd; default the design model) with the firmware's estimator;
         delay: extra periods before the command reaches the plant."""
+        if self.imu is not None:
+            return self.imu_loop(actuator_gain, Ad, Bd, delay)
         Ao, Bo, Co, Ko, Lo = self.estimator()
         return sampled.closed_loop(self.Ad if Ad is None else Ad, self.Bd if Bd is None else Bd, self.C, Ko, Lo,
                                    Ad_obs=Ao, Bd_obs=Bo, actuator_gain=actuator_gain, C_obs=Co, delay=delay)
@@ -171,6 +187,33 @@ class Design:
             "closed_loop_spectral_radius": self.checks.get("closed_loop_spectral_radius"),
             "params_sha256": self.params.sha256(),
         }
+
+
+def imu_estimator(p: Params, rod: RodModel, A, B, Ad, Bd, Wd, V_enc, w_decay: float) -> ImuEstimator:
+    """The sampled Kalman filter over the design state, the disturbance w, the encoder's offset, the gyro's
+    bias and the IMU's readings in flight (ImuEstimator), from the encoder and the tip IMU."""
+    from . import imu as imu_model
+
+    dt, n = p.dt, A.shape[0]
+    site = ImuSite.on_model(p, rod.N)
+    C_imu, D_imu = imu_model.measurement(A, B, rod.l, rod.g, site)
+    sg, sa = imu_model.noise(p)
+    scale = p["observer"]["imu_noise_scale"]
+    V = np.diag([float(V_enc[0, 0]), (scale * sg) ** 2, (scale * sa) ** 2])
+    im = ImuEstimator.structure(C_imu, D_imu, imu_model.delay_periods(p), V)
+    Af, _, Cf, _ = im.full(Ad, Bd, w_decay)
+    W = np.zeros_like(Af)
+    W[:n, :n] = Wd
+    W[n, n] = max(p["observer"]["process_noise_torque"], 1e-12) * dt
+    W[n + 1, n + 1] = p["observer"]["encoder_offset_walk"] * dt
+    W[n + 2, n + 2] = imu_model.bias_walk(p) * dt
+    vis, lam = sampled.modal_visibility(Af, C=Cf)
+    if vis < VISIBILITY_FLOOR:
+        raise DesignRefused(f"design refused: the mode at {lam:.4g} of the estimator with the tip IMU is invisible in "
+                            f"its readings (modal observability {vis:.2e})")
+    Lf, _ = sampled.kalman_current(Af, Cf, W, V)
+    im.L, im.Lw, im.La = Lf[:n], Lf[n], Lf[n + 1:]
+    return im
 
 
 def design(p: Params, progress=None) -> Design:
@@ -230,6 +273,11 @@ def design(p: Params, progress=None) -> Design:
             Wa[n, n] = qw * dt
             La, _ = sampled.kalman_current(Aa, Ca, Wa, V / dt)
             L, Lw = La[:n], float(La[n, 0])
+        imu = None
+        if p["sensors"]["tip_imu"]:
+            V_enc = np.array([[p["observer"]["imu_measurement_noise"]]])
+            imu = imu_estimator(p, rod, A, B, Ad, Bd, Wd, V_enc / dt, w_decay)
+            L, Lw = imu.L[:, :1], float(imu.Lw[0])
         if p["design"]["method"] in ("sampled", "robust"):
             K, _ = sampled.dlqr(Ad, Bd, Qd, Rd, Nd)
         else:
@@ -238,7 +286,10 @@ def design(p: Params, progress=None) -> Design:
         raise DesignRefused(f"design refused: discrete Riccati equation failed ({e})") from None
 
     d = Design(p, rod, dt, A, B, C, Ad, Bd, K, L, K_c, L_c, p["design"]["method"], checks=checks, Lw=Lw,
-               w_decay=w_decay)
+               w_decay=w_decay, imu=imu)
+    if d.method == "robust" and imu is not None:
+        raise DesignRefused("design refused: design.method = \"robust\" does not refine gains for sensors.tip_imu; "
+                            "use \"sampled\"")
     if d.method == "robust":  # the LQG gains refined to hold a family of rods (robust_design.py)
         from .robust_design import refine
 

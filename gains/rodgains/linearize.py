@@ -53,8 +53,13 @@ def paper_Ag(N: int) -> np.ndarray:
 
 
 def inverse_mass_upright(rod: RodModel) -> np.ndarray:
-    """M^-1 at upright in closed form (Sherman-Morrison for the base inertia)."""
+    """M^-1 at upright in closed form (Sherman-Morrison for the base inertia); a rod carrying point
+    masses (the tip IMU) breaks the staircase's closed-form inverse and is inverted directly."""
     ml2 = rod.m * rod.l**2
+    if rod.extra_mass:
+        M = ml2 * rod.staircase.copy()
+        M[0, 0] += rod.J
+        return np.linalg.inv(M)
     Si = staircase_inverse(rod.N)
     j = rod.J / ml2
     v = Si[:, 0]

@@ -142,6 +142,22 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "loop": {
         "rate_hz": Key(float, "Hz", _between(100, 10000)),
     },
+    # An optional 6-axis IMU on the rod near its tip (rodgains/imu.py): it sees the bend the motor's encoder
+    # cannot. Defaults: TDK ICM-42688-P datasheet values at +-2000 dps and +-16 g.
+    "sensors": {
+        "tip_imu": Key(bool, "-", default=False),
+        "imu_mass": Key(float, "kg", _between(0.0, 0.05), default=0.002),
+        "imu_from_tip": Key(float, "m", _nonneg, default=0.005),
+        "gyro_noise_density": Key(float, "rad/s/sqrt(Hz)", _positive, default=4.9e-5),
+        "accel_noise_density": Key(float, "m/s^2/sqrt(Hz)", _positive, default=6.9e-4),
+        "gyro_bias_instability": Key(float, "rad/s", _positive, default=2.4e-5),
+        "gyro_range": Key(float, "rad/s", _positive, default=34.9),
+        "accel_range": Key(float, "m/s^2", _positive, default=156.9),
+        "rate_hz": Key(float, "Hz", _between(100, 32000), default=1000.0),
+        "latency": Key(float, "s", _between(0.0, 0.01), default=0.001),
+        "gyro_bias": Key(float, "rad/s", _between(-1.0, 1.0), default=0.0087),
+        "imu_tilt_deg": Key(float, "deg", _between(-10.0, 10.0), default=0.0),
+    },
     "design": {
         "method": Key(str, "-", _choice("sampled", "continuous", "robust")),
         # design.method = "robust" (rodgains/robust_design.py): the spectral radius every model of the
@@ -168,6 +184,12 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "process_noise_torque": Key(float, "(N m)^2/s", _nonneg),
         # the estimated torque w passes with this time constant (0: a random walk that never does)
         "disturbance_time_constant": Key(float, "s", _between(0.0, 100.0), default=0.0),
+        # with sensors.tip_imu: the encoder's offset from the rod's base (boot zero, gearbox flank) as a random walk
+        "encoder_offset_walk": Key(float, "rad^2/s", _positive, default=7.6e-2),
+        # with sensors.tip_imu: measurement_noise's role for the encoder (it then tracks the motor side's motion)
+        "imu_measurement_noise": Key(float, "rad^2 s", _positive, default=4.45e-3),
+        # with sensors.tip_imu: the IMU's noise the filter assumes, as a multiple of the part's (model error) [-]
+        "imu_noise_scale": Key(float, "-", _between(0.1, 1000.0), default=1.0),
     },
     # the balance set-point trim (firmware/src/core/rod_trim.h): upright found from the holding torque
     "trim": {
@@ -228,7 +250,29 @@ def _cross_checks(p: dict) -> list[tuple[str, str]]:
         counts_fraction(p)
     except ValueError as e:
         out.append(("encoder.counts_per_motor_rev", str(e)))
+    out += _imu_checks(p)
     out += check_firmware_limits(p)
+    return out
+
+
+def _imu_checks(p: dict) -> list[tuple[str, str]]:
+    """The tip IMU must sit on the flexible rod, beyond the hub, and be read at least once a period."""
+    s, r = p["sensors"], p["rod"]
+    out = []
+    free = r["length"] - p["plant"]["hub_length"]
+    if s["imu_from_tip"] >= free:
+        out.append(("sensors.imu_from_tip", f"must be < {free:g} m (the rod beyond the hub): the IMU is off the rod, "
+                    f"got {s['imu_from_tip']!r}"))
+    if s["tip_imu"]:
+        if s["rate_hz"] < p["loop"]["rate_hz"]:
+            out.append(("sensors.rate_hz", f"must be >= loop.rate_hz = {p['loop']['rate_hz']:g} Hz (a new sample every "
+                        f"period), got {s['rate_hz']!r}"))
+        if s["imu_from_tip"] >= r["length"] * (1.0 - 1.0 / r["edges"]):
+            out.append(("sensors.imu_from_tip", f"places the IMU on edge 1 of the {r['edges']}-edge model, which turns "
+                        "with the shaft and sees no bend: move it toward the tip or raise rod.edges"))
+        if round(s["latency"] * p["loop"]["rate_hz"]) > 3:
+            out.append(("sensors.latency", f"is more than 3 control periods; the estimator models at most 3, "
+                        f"got {s['latency']!r}"))
     return out
 
 

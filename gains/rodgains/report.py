@@ -155,7 +155,8 @@ def report_text(d: Design) -> str:
         f"  least damped loop mode: {ring_hz:.3g} Hz, damping ratio {ring_zeta:.3f}"
         + (f"  <- WARNING: below {RINGING_DAMPING_RATIO:g}, encoder quantization keeps it ringing "
            f"(expect torque ripple at {ring_hz:.3g} Hz once balanced)" if ring_zeta < RINGING_DAMPING_RATIO else ""),
-        f"  encoder quantization drives {quantization_torque(d) * 1e3:.3g} mN m RMS of torque (linear, design model)",
+        *([] if d.imu is not None else
+          [f"  encoder quantization drives {quantization_torque(d) * 1e3:.3g} mN m RMS of torque (linear, design model)"]),
         f"  modal controllability {d.checks['controllability']:.2e}, observability {d.checks['observability']:.2e}",
         "",
         f"The paper's continuous LQR (its weights, Sec. III) run sampled at {rate:g} Hz:",
@@ -167,6 +168,8 @@ def report_text(d: Design) -> str:
         f"sampled spectral radius {conf['state_feedback_radius']:.3g} (state feedback), "
         f"{conf['output_feedback_radius']:.3g} (with observer) -> {_verdict(conf['output_feedback_radius'])}",
     ]
+    if d.imu is not None:
+        lines += _imu_lines(d)
     fam = d.checks.get("robust_family_radii")
     if fam:
         lqg = d.checks["robust_family_radii_lqg"]
@@ -186,6 +189,26 @@ def report_text(d: Design) -> str:
                                           f"within {g['final_deg']:.2f} deg at the end")
                       for name, g in guard["runs"].items()]
     return "\n".join(lines) + "\n"
+
+
+def _imu_lines(d: Design) -> list[str]:
+    """The tip IMU's part of the report: where it sits, and what it lets the estimator see."""
+    from .imu import ImuSite, noise, observability
+
+    p = d.params
+    site = ImuSite.on_model(p, d.N)
+    sg, sa = noise(p)
+    lines = ["", f"Tip IMU (sensors.tip_imu): {p['sensors']['imu_mass'] * 1e3:g} g at {site.position * 100:.2f} cm from the axis, "
+             f"edge {site.edge + 1} of {d.N} ({site.frac:.2f} along it); {d.imu.delay} period(s) of latency; per sample "
+             f"gyro {sg * 1e3:.3g} mrad/s, accelerometer {sa * 1e3:.3g} mm/s^2 RMS",
+             "  Observability of each mode of the design model (one sample of a 1 rad mode against the sensors' noise):",
+             "  mode s [1/s]                 encoder alone   encoder + IMU   gain"]
+    for r in observability(p, d.A, d.B, d.rod.l, d.rod.g):
+        s = r["s"]
+        name = f"{s.real:.4g}{s.imag:+.4g}j" if abs(s.imag) > 1e-9 else f"{s.real:.4g}"
+        lines.append(f"  {name:28s} {r['seen_encoder']:13.3g}   {r['seen_with_imu']:13.3g}   "
+                     f"x{r['seen_with_imu'] / max(r['seen_encoder'], 1e-300):.3g}")
+    return lines
 
 
 def _verdict(rho: float) -> str:

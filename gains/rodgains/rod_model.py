@@ -39,6 +39,7 @@ class RodModel:
     g: float  # gravity [m/s^2]
     J: float = 0.0  # base inertia at the output shaft [kg m^2]
     b: float = 0.0  # base viscous friction [N m s/rad]
+    extra_mass: tuple[float, ...] = ()  # point masses at nodes 0..N beyond the rod's own (the tip IMU) [kg]
 
     @classmethod
     def from_params(cls, p: Params, design: bool = True, edges: int | None = None) -> "RodModel":
@@ -46,6 +47,11 @@ class RodModel:
         r = p["rod"]
         N = edges or p.N
         l = r["length"] / N
+        extra = ()
+        if p["sensors"]["tip_imu"]:
+            from .imu import ImuSite
+
+            extra = tuple(float(v) for v in ImuSite.on_model(p, N).node_masses(N, p["sensors"]["imu_mass"]))
         return cls(
             N=N,
             l=l,
@@ -55,6 +61,7 @@ class RodModel:
             g=r["gravity"],
             J=p.design_base_inertia if design else p.base_inertia,
             b=p.design_base_friction if design else p.base_friction,
+            extra_mass=extra,
         )
 
     def kelvin_voigt(self) -> "RodModel":
@@ -65,8 +72,12 @@ class RodModel:
     # --- constant structure (computed once per rod: f() runs thousands of times a simulation) ---
     @cached_property
     def mass_below(self) -> np.ndarray:
-        """c_i = N + 1/2 - i: mass beyond node i-1 in units of m (node masses m/2, m, ..., m, m/2)."""
-        return _read_only(self.N + 0.5 - np.arange(1, self.N + 1))
+        """c_i = N + 1/2 - i: mass beyond node i-1 in units of m (node masses m/2, m, ..., m, m/2), plus
+        the point masses of extra_mass beyond it."""
+        c = self.N + 0.5 - np.arange(1, self.N + 1)
+        if self.extra_mass:
+            c = c + np.cumsum(np.asarray(self.extra_mass)[::-1])[::-1][1:] / self.m
+        return _read_only(c)
 
     @cached_property
     def staircase(self) -> np.ndarray:

@@ -41,6 +41,9 @@ def static_torque_per_offset(d) -> float:
 def trim_gains(d) -> TrimGains:
     """rod_trim's gains for a Design (its params' [trim] table); rate 0 when the trim is off."""
     t = d.params["trim"]
+    if d.imu is not None:  # the estimator finds upright from the IMU's gravity: nothing for the trim to seek
+        return TrimGains(hold_k=1.0 - math.exp(-d.dt / t["hold_time_constant"]), rate=0.0, band=t["band"],
+                         gate=math.radians(t["gate_deg"]), limit=math.radians(t["limit_deg"]), torque_per_offset=0.0)
     G = static_torque_per_offset(d)
     on = t["time_constant"] > 0 and abs(G) > 1e-9
     return TrimGains(hold_k=1.0 - math.exp(-d.dt / t["hold_time_constant"]),

@@ -47,7 +47,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     static rod_device_t dev;
     rod_device_init(&dev);
-    rod_inputs_t in = {0, 0u, 0u, false};
+    rod_inputs_t in = {0, 0u, 0u, false, {0.0f, 0.0f, 0.0f, false}};
     rod_outputs_t out;
     size_t pos = 0;
     while (pos < size) {

@@ -13,12 +13,12 @@
 /* ---- the header's layout ---------------------------------------------------------------- */
 
 /* The macro set this firmware was written against (gains/codegen.py HEADER_SCHEMA_VERSION). */
-#define ROD_GAINS_SCHEMA_EXPECTED 3
+#define ROD_GAINS_SCHEMA_EXPECTED 4
 
 #ifndef ROD_GAINS_SCHEMA_VERSION
 #error "rod_gains.h has no ROD_GAINS_SCHEMA_VERSION: regenerate it with `rodctl gains`"
 #elif ROD_GAINS_SCHEMA_VERSION != ROD_GAINS_SCHEMA_EXPECTED
-#error "rod_gains.h has a different ROD_GAINS_SCHEMA_VERSION than this firmware expects (3): regenerate it with the rodctl of this checkout (`rodctl gains`)"
+#error "rod_gains.h has a different ROD_GAINS_SCHEMA_VERSION than this firmware expects (4): regenerate it with the rodctl of this checkout (`rodctl gains`)"
 #endif
 
 #if !defined(ROD_N) || !defined(ROD_NX) || !defined(ROD_LOOP_PERIOD_US) || !defined(ROD_DT_S) \
@@ -33,8 +33,18 @@
     || !defined(ROD_AD_INIT) || !defined(ROD_BD_INIT) || !defined(ROD_K_INIT) || !defined(ROD_L_INIT) \
     || !defined(ROD_L_DISTURBANCE) || !defined(ROD_W_DECAY) \
     || !defined(ROD_TRIM_HOLD_K) || !defined(ROD_TRIM_RATE) || !defined(ROD_TRIM_BAND_NM) \
-    || !defined(ROD_TRIM_GATE_RAD) || !defined(ROD_TRIM_MAX_RAD)
+    || !defined(ROD_TRIM_GATE_RAD) || !defined(ROD_TRIM_MAX_RAD) || !defined(ROD_NY) \
+    || !defined(ROD_IMU_GYRO_RANGE_RAD_S) || !defined(ROD_IMU_ACCEL_RANGE_M_S2) \
+    || !defined(ROD_IMU_TILT_COS) || !defined(ROD_IMU_TILT_SIN)
 #error "rod_gains.h lacks a macro the firmware needs: regenerate it with `rodctl gains`"
+#endif
+#if ROD_NY != 1 && ROD_NY != 3
+#error "ROD_NY must be 1 (the encoder) or 3 (the encoder and the tip IMU)"
+#endif
+#if ROD_NY > 1 && (!defined(ROD_IMU_NA) || !defined(ROD_IMU_L_INIT) || !defined(ROD_IMU_LW_INIT) \
+    || !defined(ROD_IMU_LA_INIT) || !defined(ROD_IMU_AZ_INIT) || !defined(ROD_IMU_AA_INIT) || !defined(ROD_IMU_BA_INIT) \
+    || !defined(ROD_IMU_CZ_INIT) || !defined(ROD_IMU_CA_INIT) || !defined(ROD_IMU_DY_INIT))
+#error "rod_gains.h was designed with the tip IMU but lacks its tables: regenerate it with `rodctl gains`"
 #endif
 
 /* ---- integer assumptions (preprocessor) ------------------------------------------------- */

@@ -27,6 +27,7 @@ void rod_control_init(rod_control_t *c)
     rod_angle_from_count(0, &c->angle);
     rod_rate_filter_init(&c->filter, 0);
     rod_trim_init(&c->trim);
+    rod_imu_init(&c->imu);
 }
 
 /* ---- commands ---------------------------------------------------------------------------- */
@@ -212,6 +213,8 @@ static void check_safety(rod_control_t *c, bool overrun)
         trip(c, ROD_REASON_ANGLE_LIMIT);
     } else if (c->mode == ROD_MODE_IDENTIFY && !(fabsf(c->angle.from_bottom) <= ROD_ANGLE_LIMIT_RAD)) {
         trip(c, ROD_REASON_ANGLE_LIMIT);
+    } else if (ROD_NY > 1 && c->mode != ROD_MODE_IDENTIFY && rod_imu_lost(&c->imu)) {
+        trip(c, ROD_REASON_IMU);
     }
 }
 
@@ -225,16 +228,21 @@ static bool try_catch(rod_control_t *c)
     }
     c->upright_turn = c->angle.turn;
     rod_trim_catch(&c->trim);
-    rod_observer_init(&c->obs, c->angle.from_upright - c->trim.trim, c->rate);
+    rod_observer_init(&c->obs, c->angle.from_upright - c->trim.trim, c->rate, c->imu.gyro_bias);
     rod_runaway_start(&c->runaway, c->rate);
     c->mode = ROD_MODE_BALANCE;
     return true;
 }
 
-/* The balance's measurement: theta_1 from the upright the trim found. */
-static float balance_measurement(const rod_control_t *c)
+/* The balance's measurement: theta_1 from the upright the trim found, then the IMU's gyro and
+ * accelerometer y (the axis that sees the lean). */
+static void balance_measurement(const rod_control_t *c, float y[ROD_NY])
 {
-    return rod_angle_from_upright_of(&c->angle, c->upright_turn) - c->trim.trim;
+    y[0] = rod_angle_from_upright_of(&c->angle, c->upright_turn) - c->trim.trim;
+#if ROD_NY > 1
+    y[1] = c->imu_reading.gyro;
+    y[2] = c->imu_reading.accel_y;
+#endif
 }
 
 /* Near upright and slow, where a steady torque can only be holding the rod off upright. */
@@ -260,8 +268,11 @@ static float control_law(rod_control_t *c)
         }
         return rod_swingup_torque(&c->swing, c->settings.swing_amplitude, c->settings.swing_angle,
                                   c->angle.from_bottom, c->rate);
-    case ROD_MODE_BALANCE:
-        return rod_observer_step(&c->obs, balance_measurement(c));
+    case ROD_MODE_BALANCE: {
+        float y[ROD_NY];
+        balance_measurement(c, y);
+        return rod_observer_step(&c->obs, y, c->imu_good);
+    }
     case ROD_MODE_IDENTIFY: {
         bool done;
         float u = rod_identify_torque(&c->ident, &done);
@@ -285,6 +296,13 @@ void rod_control_step(rod_control_t *c, const rod_inputs_t *in, uint32_t heartbe
     c->driver_fault = in->driver_fault;
     rod_angle_from_count(count, &c->angle);
     c->rate = rod_rate_filter_step(&c->filter, count);
+#if ROD_NY > 1
+    c->imu_reading = in->imu;
+    /* the part is mounted turned by the tilt: turn its accelerometer back into the rod's frame */
+    c->imu_reading.accel_x = ROD_IMU_TILT_COS * in->imu.accel_x - ROD_IMU_TILT_SIN * in->imu.accel_y;
+    c->imu_reading.accel_y = ROD_IMU_TILT_SIN * in->imu.accel_x + ROD_IMU_TILT_COS * in->imu.accel_y;
+    c->imu_good = rod_imu_step(&c->imu, &in->imu, count);
+#endif
 
     check_safety(c, overrun);
 

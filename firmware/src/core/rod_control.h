@@ -21,6 +21,8 @@
  *   NON_FINITE    NaN/inf in the estimate, torque or duty
  *   RUNAWAY       in the first second of BALANCE or SWING_UP the base accelerated against the
  *                 torque: a reversed encoder or motor (rod_runaway.h)
+ *   IMU           a firmware with the tip IMU (ROD_NY > 1), armed for balance (CATCH, SWING_UP,
+ *                 BALANCE), and ROD_IMU_FAULT_PERIODS bad IMU samples in a row (rod_imu.h)
  * ("armed" = CATCH, SWING_UP, BALANCE or IDENTIFY.)
  *
  * Commands come from the host (through the device's command ring) and return a ROD_ACK_*
@@ -35,6 +37,7 @@
 #include "rod_angle.h"
 #include "rod_config.h"
 #include "rod_identify.h"
+#include "rod_imu.h"
 #include "rod_io.h"
 #include "rod_observer.h"
 #include "rod_rig.h"
@@ -68,6 +71,9 @@ typedef struct {
     rod_angle_t angle;
     rod_rate_filter_t filter;
     float rate;
+    rod_imu_t imu;       /* the tip IMU's health and rest bias (ROD_NY > 1) */
+    rod_imu_reading_t imu_reading;
+    bool imu_good;       /* this period's sample may correct the estimate */
 
     /* balance */
     rod_observer_t obs;

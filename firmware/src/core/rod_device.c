@@ -141,6 +141,28 @@ static void queue_telemetry(rod_device_t *dev, uint32_t now_us)
     rod_link_publish_event(&dev->link);
 }
 
+#if ROD_NY > 1
+static void queue_imu(rod_device_t *dev, uint32_t now_us)
+{
+    const rod_control_t *c = &dev->control;
+    rod_event_t *ev = new_event(dev, ROD_MSG_IMU, now_us);
+    if (ev == NULL) {
+        return;
+    }
+    rod_msg_imu_t *m = &ev->u.imu;
+    bool balancing = c->mode == ROD_MODE_BALANCE;
+    m->gyro = c->imu_reading.gyro;
+    m->accel_x = c->imu_reading.accel_x;
+    m->accel_y = c->imu_reading.accel_y;
+    m->gyro_bias = balancing ? c->obs.a[1] : c->imu.gyro_bias;
+    m->encoder_offset = balancing ? c->obs.a[0] : 0.0f;
+    m->status = (uint8_t)((c->imu_reading.fresh ? ROD_IMU_FLAG_FRESH : 0u) | (c->imu_good ? ROD_IMU_FLAG_GOOD : 0u)
+                          | (c->imu.bias_known ? ROD_IMU_FLAG_BIAS_KNOWN : 0u));
+    m->bad_run = (uint16_t)(c->imu.bad_run > 0xFFFFu ? 0xFFFFu : c->imu.bad_run);
+    rod_link_publish_event(&dev->link);
+}
+#endif
+
 static void queue_hello(rod_device_t *dev, uint32_t now_us)
 {
     const rod_control_t *c = &dev->control;
@@ -188,6 +210,9 @@ void rod_device_step(rod_device_t *dev, const rod_inputs_t *in, rod_outputs_t *o
     if (++dev->steps_since_telemetry >= dev->control.settings.decimation) {
         dev->steps_since_telemetry = 0;
         queue_telemetry(dev, in->now_us);
+#if ROD_NY > 1
+        queue_imu(dev, in->now_us);
+#endif
     }
     if (++dev->steps_since_hello >= ROD_HELLO_INTERVAL_STEPS) {
         dev->hello_wanted = true;

@@ -77,6 +77,9 @@ size_t rod_link_tx(rod_link_t *l, uint8_t *out, size_t cap)
         case ROD_MSG_ACK:
             len = rod_proto_encode_ack(&ev->u.ack, ev->seq, ev->time_us, out, cap);
             break;
+        case ROD_MSG_IMU:
+            len = rod_proto_encode_imu(&ev->u.imu, ev->seq, ev->time_us, out, cap);
+            break;
         default:
             break;
         }

@@ -25,7 +25,7 @@ extern "C" {
 
 /* A device->host frame as the step creates it: numbered and stamped, encoded later. */
 typedef struct {
-    uint8_t type; /* ROD_MSG_TELEMETRY, ROD_MSG_HELLO or ROD_MSG_ACK */
+    uint8_t type; /* ROD_MSG_TELEMETRY, ROD_MSG_HELLO, ROD_MSG_ACK or ROD_MSG_IMU */
     uint32_t seq;
     uint32_t time_us;
     union {
@@ -36,6 +36,7 @@ typedef struct {
         } telemetry;
         rod_msg_hello_t hello;
         rod_msg_ack_t ack;
+        rod_msg_imu_t imu;
     } u;
 } rod_event_t;
 

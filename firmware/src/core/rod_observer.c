@@ -14,9 +14,21 @@
 static const float Ad[ROD_NX][ROD_NX] = ROD_AD_INIT;
 static const float Bd[ROD_NX] = ROD_BD_INIT;
 static const float K[ROD_NX] = ROD_K_INIT;
+#if ROD_NY == 1
 static const float L[ROD_NX] = ROD_L_INIT;
+#else
+static const float L[ROD_NX][ROD_NY] = ROD_IMU_L_INIT;
+static const float LW[ROD_NY] = ROD_IMU_LW_INIT;
+static const float LA[ROD_IMU_NA][ROD_NY] = ROD_IMU_LA_INIT;
+static const float AZ[ROD_IMU_NA][ROD_NX] = ROD_IMU_AZ_INIT;
+static const float AA[ROD_IMU_NA][ROD_IMU_NA] = ROD_IMU_AA_INIT;
+static const float BA[ROD_IMU_NA] = ROD_IMU_BA_INIT;
+static const float CZ[ROD_NY][ROD_NX] = ROD_IMU_CZ_INIT;
+static const float CA[ROD_NY][ROD_IMU_NA] = ROD_IMU_CA_INIT;
+static const float DY[ROD_NY] = ROD_IMU_DY_INIT;
+#endif
 
-void rod_observer_init(rod_observer_t *o, float y, float rate)
+void rod_observer_init(rod_observer_t *o, float y, float rate, float gyro_bias)
 {
     for (int i = 0; i < ROD_N; i++) {
         o->z[i] = y;
@@ -25,6 +37,20 @@ void rod_observer_init(rod_observer_t *o, float y, float rate)
     o->u_prev = 0.0f;
     o->w = 0.0f;
     o->finite = isfinite(y) && isfinite(rate);
+#if ROD_NY > 1
+    /* the readings in flight are what this estimate would give: AZ z (no torque yet); the offset 0 */
+    for (int i = 0; i < ROD_IMU_NA; i++) {
+        float s = 0.0f;
+        for (int j = 0; j < ROD_NX; j++) {
+            s = fmaf(AZ[i][j], o->z[j], s);
+        }
+        o->a[i] = s;
+    }
+    o->a[0] = 0.0f;
+    o->a[1] = gyro_bias;
+#else
+    (void)gyro_bias;
+#endif
 }
 
 /* Ad z + Bd u with the column loop fully unrolled (NX is a compile-time constant): no loop
@@ -48,11 +74,13 @@ static inline void predict(const float *z, float u, float *zp)
     }
 }
 
-float rod_observer_step(rod_observer_t *o, float y)
+#if ROD_NY == 1
+float rod_observer_step(rod_observer_t *o, const float y[ROD_NY], bool imu_ok)
 {
+    (void)imu_ok;
     float zp[ROD_NX];
     predict(o->z, o->u_prev + o->w, zp);
-    const float innovation = y - zp[0];
+    const float innovation = y[0] - zp[0];
     o->w = fmaf(ROD_L_DISTURBANCE, innovation, ROD_W_DECAY * o->w);
     float fb = o->w;
     /* x - x is 0 for every finite x and NaN otherwise, so `check` stays 0 exactly while the
@@ -68,6 +96,62 @@ float rod_observer_step(rod_observer_t *o, float y)
     o->finite = (check == 0.0f) && isfinite(o->w);
     return -fb;
 }
+#else
+float rod_observer_step(rod_observer_t *o, const float y[ROD_NY], bool imu_ok)
+{
+    const float ue = o->u_prev + o->w;
+    float zp[ROD_NX], ap[ROD_IMU_NA], e[ROD_NY];
+    predict(o->z, ue, zp);
+    for (int i = 0; i < ROD_IMU_NA; i++) {
+        float s = BA[i] * ue;
+        for (int j = 0; j < ROD_NX; j++) {
+            s = fmaf(AZ[i][j], o->z[j], s);
+        }
+        for (int j = 0; j < ROD_IMU_NA; j++) {
+            s = fmaf(AA[i][j], o->a[j], s);
+        }
+        ap[i] = s;
+    }
+    const float wp = ROD_W_DECAY * o->w;
+    for (int r = 0; r < ROD_NY; r++) {
+        float s = DY[r] * (o->u_prev + wp);
+        for (int j = 0; j < ROD_NX; j++) {
+            s = fmaf(CZ[r][j], zp[j], s);
+        }
+        for (int j = 0; j < ROD_IMU_NA; j++) {
+            s = fmaf(CA[r][j], ap[j], s);
+        }
+        /* a bad IMU sample corrects nothing: the prediction carries the IMU's states */
+        e[r] = (r == 0 || imu_ok) ? y[r] - s : 0.0f;
+    }
+    float w = wp;
+    for (int r = 0; r < ROD_NY; r++) {
+        w = fmaf(LW[r], e[r], w);
+    }
+    o->w = w;
+    float fb = w;
+    float check = 0.0f;
+    for (int i = 0; i < ROD_NX; i++) {
+        float zi = zp[i];
+        for (int r = 0; r < ROD_NY; r++) {
+            zi = fmaf(L[i][r], e[r], zi);
+        }
+        o->z[i] = zi;
+        fb = fmaf(K[i], zi, fb);
+        check += zi - zi;
+    }
+    for (int i = 0; i < ROD_IMU_NA; i++) {
+        float ai = ap[i];
+        for (int r = 0; r < ROD_NY; r++) {
+            ai = fmaf(LA[i][r], e[r], ai);
+        }
+        o->a[i] = ai;
+        check += ai - ai;
+    }
+    o->finite = (check == 0.0f) && isfinite(o->w);
+    return -fb;
+}
+#endif
 
 float rod_observer_feedback(const rod_observer_t *o)
 {

@@ -8,6 +8,12 @@
  * torque-constant error, a push), cancelled: a random walk (ROD_W_DECAY 1) or a passing torque,
  * which leaves a steady torque to the trim. The tables come from rod_gains.h (designed for
  * exactly this form and ZOH at the loop rate).
+ *
+ * With the tip IMU (ROD_NY = 3, y = [theta_1, gyro, accelerometer y]) the estimate also carries a =
+ * [encoder offset, gyro bias, the IMU's readings in flight] (gains/rodgains/imu.py, ImuEstimator):
+ *     a_pred = AZ z + AA a + BA (u_prev + w);  y_hat = CZ z_pred + CA a_pred + DY (u_prev + w_pred)
+ *     e = y - y_hat;  z = z_pred + L e;  w = w_pred + Lw e;  a = a_pred + La e
+ * The encoder's offset is what finds upright from gravity: the accelerometer sees the tip's lean.
  */
 #ifndef ROD_OBSERVER_H
 #define ROD_OBSERVER_H
@@ -22,18 +28,23 @@ extern "C" {
 
 typedef struct {
     float z[ROD_NX]; /* estimate z[k|k]: angles then rates, relative to upright */
+#if ROD_NY > 1
+    float a[ROD_IMU_NA]; /* encoder offset [rad], gyro bias [rad/s], IMU readings in flight */
+#endif
     float w;         /* estimated torque disturbance at the base (dry friction, k_t error) [N m] */
     float u_prev;    /* torque held over the last period [N m] */
     bool finite;     /* false once any estimate entry is NaN or inf */
 } rod_observer_t;
 
 /* Estimator initialization at the catch (paper Sec. III-C): every angle deviation = y, every
- * rate = the measured base rate, u_prev = 0. */
-void rod_observer_init(rod_observer_t *o, float y, float rate);
+ * rate = the measured base rate, u_prev = 0. With the IMU: the offset 0, the gyro bias as measured at
+ * rest, the readings in flight those of this estimate. */
+void rod_observer_init(rod_observer_t *o, float y, float rate, float gyro_bias);
 
-/* One period: predict with u_prev, correct with y; returns u = -K z of the new estimate
- * (before any torque limit). Also refreshes o->finite. */
-float rod_observer_step(rod_observer_t *o, float y);
+/* One period: predict with u_prev, correct with the measurement y[ROD_NY] (y[0] the encoder's
+ * theta_1 from upright; y[1..] the IMU's, used only when imu_ok); returns u = -K z of the new
+ * estimate (before any torque limit). Also refreshes o->finite. */
+float rod_observer_step(rod_observer_t *o, const float y[ROD_NY], bool imu_ok);
 
 /* u = -K z of the current estimate, without advancing it (used on the catch step). */
 float rod_observer_feedback(const rod_observer_t *o);

@@ -329,7 +329,7 @@ size_t rod_proto_encode_telemetry(const rod_msg_telemetry_t *m, uint32_t seq, ui
 
 /* Fixed-size messages are always short enough for link mode (checked at compile time). */
 #define ROD_SHORT(payload) (ROD_PROTO_HEADER_SIZE + (payload) + ROD_PROTO_CRC_SIZE < 254u)
-_Static_assert(ROD_SHORT(ROD_HELLO_PAYLOAD_SIZE) && ROD_SHORT(ROD_ACK_PAYLOAD_SIZE) && ROD_SHORT(ROD_SET_PAYLOAD_SIZE) &&
+_Static_assert(ROD_SHORT(ROD_HELLO_PAYLOAD_SIZE) && ROD_SHORT(ROD_ACK_PAYLOAD_SIZE) && ROD_SHORT(ROD_IMU_PAYLOAD_SIZE) && ROD_SHORT(ROD_SET_PAYLOAD_SIZE) &&
                    ROD_SHORT(ROD_ARM_PAYLOAD_SIZE) && ROD_SHORT(ROD_IDENTIFY_PAYLOAD_SIZE),
                "fixed-size rodlink messages must stay below 254 bytes");
 
@@ -378,6 +378,26 @@ size_t rod_proto_encode_ack(const rod_msg_ack_t *m, uint32_t seq, uint32_t time_
     wr_u32(&w, m->command_seq, 1);
     wr_u8(&w, m->mode, 1);
     wr_u8(&w, 0u, 1); /* reserved */
+    return wr_finish(&w, out, 1);
+}
+
+size_t rod_proto_encode_imu(const rod_msg_imu_t *m, uint32_t seq, uint32_t time_us, uint8_t *out, size_t cap)
+{
+    size_t off = frame_offset(ROD_IMU_PAYLOAD_SIZE, cap);
+    if (off == 0u || out == NULL) {
+        return 0;
+    }
+    wr_t w;
+    wr_begin(&w, out, off);
+    wr_header(&w, ROD_MSG_IMU, seq, time_us, 1);
+    wr_f32(&w, m->gyro, 1);
+    wr_f32(&w, m->accel_x, 1);
+    wr_f32(&w, m->accel_y, 1);
+    wr_f32(&w, m->gyro_bias, 1);
+    wr_f32(&w, m->encoder_offset, 1);
+    wr_u8(&w, m->status, 1);
+    wr_u8(&w, 0u, 1); /* reserved */
+    wr_u16(&w, m->bad_run, 1);
     return wr_finish(&w, out, 1);
 }
 
@@ -540,6 +560,25 @@ int rod_proto_decode_ack(const rod_packet_t *p, rod_msg_ack_t *m)
     m->result = q[ROD_ACK_OFF_RESULT];
     m->command_seq = get_u32(q + ROD_ACK_OFF_COMMAND_SEQ);
     m->mode = q[ROD_ACK_OFF_MODE];
+    return ROD_DECODE_OK;
+}
+
+int rod_proto_decode_imu(const rod_packet_t *p, rod_msg_imu_t *m)
+{
+    if (p->type != ROD_MSG_IMU) {
+        return ROD_DECODE_TYPE;
+    }
+    if (p->payload_len != ROD_IMU_PAYLOAD_SIZE) {
+        return ROD_DECODE_LENGTH;
+    }
+    const uint8_t *q = p->payload;
+    m->gyro = get_f32(q + ROD_IMU_OFF_GYRO);
+    m->accel_x = get_f32(q + ROD_IMU_OFF_ACCEL_X);
+    m->accel_y = get_f32(q + ROD_IMU_OFF_ACCEL_Y);
+    m->gyro_bias = get_f32(q + ROD_IMU_OFF_GYRO_BIAS);
+    m->encoder_offset = get_f32(q + ROD_IMU_OFF_ENCODER_OFFSET);
+    m->status = q[ROD_IMU_OFF_STATUS];
+    m->bad_run = get_u16(q + ROD_IMU_OFF_BAD_RUN);
     return ROD_DECODE_OK;
 }
 

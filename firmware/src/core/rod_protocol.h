@@ -43,6 +43,15 @@ typedef struct {
     uint8_t header_sha256[32];
 } rod_msg_hello_t;
 
+/* Device -> host, after each telemetry frame of a firmware with the tip IMU. */
+typedef struct {
+    float gyro, accel_x, accel_y; /* the sample [rad/s, m/s^2], rod frame */
+    float gyro_bias;              /* [rad/s] */
+    float encoder_offset;         /* [rad] */
+    uint8_t status;               /* ROD_IMU_FLAG_* */
+    uint16_t bad_run;             /* unusable samples in a row */
+} rod_msg_imu_t;
+
 /* Device -> host, one per command frame the device received (CRC-valid). */
 typedef struct {
     uint8_t command, result;  /* command = the command's message type; result = ROD_ACK_* */
@@ -88,6 +97,7 @@ size_t rod_cobs_decode(const uint8_t *in, size_t n, uint8_t *out, size_t cap);
 size_t rod_proto_encode_telemetry(const rod_msg_telemetry_t *m, uint32_t seq, uint32_t time_us, uint8_t *out, size_t cap);
 size_t rod_proto_encode_hello(const rod_msg_hello_t *m, uint32_t seq, uint32_t time_us, uint8_t *out, size_t cap);
 size_t rod_proto_encode_ack(const rod_msg_ack_t *m, uint32_t seq, uint32_t time_us, uint8_t *out, size_t cap);
+size_t rod_proto_encode_imu(const rod_msg_imu_t *m, uint32_t seq, uint32_t time_us, uint8_t *out, size_t cap);
 /* Host side (used by the SIL and tests): m->type, m->seq, m->time_us and arm_mode (ARM),
  * param/value (SET) or excitation..shape2 (IDENTIFY); m->status is ignored. */
 size_t rod_proto_encode_command(const rod_msg_command_t *m, uint8_t *out, size_t cap);
@@ -146,6 +156,7 @@ int rod_proto_decode_frame(const uint8_t *frame, size_t n, uint8_t *pkt_buf, siz
 int rod_proto_decode_telemetry(const rod_packet_t *p, rod_msg_telemetry_t *m, float *theta_hat, float *rate_hat, size_t max_n);
 int rod_proto_decode_hello(const rod_packet_t *p, rod_msg_hello_t *m);
 int rod_proto_decode_ack(const rod_packet_t *p, rod_msg_ack_t *m);
+int rod_proto_decode_imu(const rod_packet_t *p, rod_msg_imu_t *m);
 /* Fills *m from any packet, status as rod_proto_rx_feed gives it; returns ROD_DECODE_OK. */
 int rod_proto_decode_command(const rod_packet_t *p, rod_msg_command_t *m);
 

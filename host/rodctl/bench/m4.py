@@ -29,7 +29,9 @@ ICOUNT_CANDIDATES = [Path(p) for p in (os.environ.get("ROD_M4_ICOUNT", ""),) if 
     paths.REPO.parent / "shared" / "tools" / "m4-icount.sh", Path("/work/shared/tools/m4-icount.sh")]
 ICOUNT = next((p for p in ICOUNT_CANDIDATES if p.is_file()), ICOUNT_CANDIDATES[0])
 STEPS = 2000
-GOALS = {"m4_step_instructions_n5": 2000, "m4_step_instructions_n20": 15000}
+# the tip IMU's step at the default order must stay under a quarter of the 1 ms period: 30 000 cycles at 120 MHz,
+# and an M4F instruction takes at least one
+GOALS = {"m4_step_instructions_n5": 2000, "m4_step_instructions_n20": 15000, "m4_step_instructions_imu": 30000}
 
 BENCH_C = r"""
 #include <stdio.h>
@@ -49,7 +51,8 @@ static void drain(void)
 
 int main(void)
 {
-    rod_inputs_t in = {490, 0u, 0u, false};
+    /* the tip IMU upright (a firmware without it ignores the sample), its readings moving as a live part's do */
+    rod_inputs_t in = {490, 0u, 0u, false, {0.0f, 9.81f, 0.0f, true}};
     rod_outputs_t out;
     rod_device_init(&dev);
     rod_msg_command_t arm = {.type = ROD_MSG_ARM, .seq = 1u, .status = ROD_ACK_OK, .arm_mode = ROD_ARM_BALANCE};
@@ -62,6 +65,8 @@ int main(void)
         int phase = (k / 40) % 8;
         in.encoder_count = 490 + (phase < 4 ? phase : 8 - phase) - 2;
         in.now_us += ROD_LOOP_PERIOD_US;
+        in.imu.gyro = 0.001f * (float)(k % 5) - 0.002f;
+        in.imu.accel_y = 0.01f * (float)(k % 7) - 0.03f;
         rod_device_heartbeat(&dev);
         bench_start();
         rod_device_step(&dev, &in, &out);
@@ -83,14 +88,16 @@ def _icount_tool() -> Path:
     return ICOUNT
 
 
-def header_for_edges(n: int, out_dir: Path) -> Path:
-    """What `rodctl gains --set rod.edges=n --header out_dir/n<n>/rod_gains.h` writes (never the committed one)."""
+def header_for_edges(n: int | None, out_dir: Path, *overrides: str, name: str | None = None) -> Path:
+    """What `rodctl gains --set rod.edges=n [--set ...] --header out_dir/<name>/rod_gains.h` writes (never the
+    committed one); n None keeps the default order."""
     import argparse
 
     from rodctl.cli.gains import generated_files
 
-    header = out_dir / f"n{n}" / "rod_gains.h"
-    args = argparse.Namespace(params=None, overrides=[f"rod.edges={n}"], header=str(header))
+    header = out_dir / (name or f"n{n}") / "rod_gains.h"
+    sets = ([f"rod.edges={n}"] if n is not None else []) + list(overrides)
+    args = argparse.Namespace(params=None, overrides=sets, header=str(header))
     _, files = generated_files(args)
     for path, text in files.items():
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -135,11 +142,14 @@ def measure() -> dict:
     i5, _ = step_instructions(n5, work / "n5")
     i20, _ = step_instructions(n20, work / "n20")
     idef, _ = step_instructions(paths.COMMITTED_HEADER, work / "default")
+    imu = header_for_edges(None, work / "headers", "sensors.tip_imu=true", name="imu")
+    iimu, _ = step_instructions(imu, work / "imu")
     size = target_build.build(paths.COMMITTED_HEADER)
     return {
         "m4_step_instructions_n5": round(i5, 1),
         "m4_step_instructions_n20": round(i20, 1),
         "m4_step_instructions_default": round(idef, 1),
+        "m4_step_instructions_imu": round(iimu, 1),
         "m4_core_flash_bytes": size.flash_bytes,
         "m4_core_ram_bytes": size.ram_bytes,
     }

@@ -18,6 +18,8 @@ GOALS = {
     "m4_step_instructions_n5": (2000, "<=", "instr", "one control step + its telemetry frame, Cortex-M4F, N = 5"),
     "m4_step_instructions_n20": (15000, "<=", "instr", "the same, N = 20"),
     "m4_step_instructions_default": (None, "", "instr", "the same, the committed header's N (rod.edges)"),
+    "m4_step_instructions_imu": (30000, "<=", "instr", "the same with the tip IMU (sensors.tip_imu), default N: "
+                                 "a quarter of the 1 ms period at 120 MHz"),
     "m4_core_flash_bytes": (None, "", "B", "portable core flash (text + data), the committed header"),
     "m4_core_ram_bytes": (None, "", "B", "portable core RAM (data + bss), the committed header"),
     "sil_realtime_factor_n5": (1000, ">=", "x", "SIL firmware + N = 5 inextensible plant at 1 kHz"),

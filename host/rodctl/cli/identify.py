@@ -344,7 +344,33 @@ def _check_compensation_cases(args) -> None:
     check_jobs(args.jobs)
 
 
+def run_imu(args) -> int:
+    """--imu: the tip IMU's calibration on the hanging rod (rodctl.ident.imu_cal); nothing moves the motor."""
+    from rodctl.check.user import user_for
+    from rodctl.cli.common import session_for
+    from rodctl.ident.imu_cal import calibrate, measure
+
+    if args.logs:
+        raise InputError("--imu measures on the board: give --port, not LOG files")
+
+    def say(text: str) -> None:
+        print(text, file=sys.stderr, flush=True)
+
+    with session_for(args) as s:
+        still, turn = measure(s, user_for(s, args.yes), say)
+    try:
+        cal = calibrate(still, turn)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    for line in cal.lines():
+        print(line)
+    print("IMU: PASS" if cal.ok else "IMU: FAIL")
+    return 0 if cal.ok else 1
+
+
 def run_identify(args) -> int:
+    if args.imu:
+        return run_imu(args)
     if args.logs and args.port:
         raise InputError("give recorded LOG files or --port, not both")
     if args.starts < 1:
@@ -382,6 +408,10 @@ def register(sub) -> None:
     p.add_argument("--plot", metavar="PNG", help="figure of measured vs simulated theta_1 (default: --out with .png)")
     p.add_argument("--log-dir", default=".", metavar="DIR", help="where the experiments' logs go (default .)")
     p.add_argument("--yes", action="store_true", help="do not ask before moving the motor")
+    p.add_argument("--imu", action="store_true",
+                   help="calibrate the tip IMU instead (firmware with sensors.tip_imu): its gyro bias, its axes against "
+                        "gravity and its mounting tilt with the rod hanging, then its sign under a hand's turn; the "
+                        "motor stays off. Exit 0 PASS, 1 FAIL (each failure names its fix)")
     p.add_argument("--settle", type=float, default=SETTLE_S, metavar="S",
                    help=f"wait S seconds between experiments for the rod's swing to die out (default {SETTLE_S:g})")
     p.add_argument("--scale", type=float, default=1.0, metavar="X",

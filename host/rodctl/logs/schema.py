@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-FORMAT_VERSION = "2"  # 1: CSV with '#' metadata lines and HELLO/ACK rows mixed in (no longer written)
+FORMAT_VERSION = "3"  # 3: the tip IMU's columns; 2: without them; 1: CSV with '#' metadata lines (no longer written)
 
 # (name, numpy dtype, unit, meaning). "i8" columns are never empty; "f8" columns are f32 values from the device.
 BASE_COLUMNS = [
@@ -34,6 +34,18 @@ BASE_COLUMNS = [
     ("rx_errors_count", "i8", "1", "bad frames the device received, since boot"),
 ]
 
+# The tip IMU (IMU frames, right after each TELEMETRY of a firmware with sensors.tip_imu); NaN / -1 without one.
+IMU_COLUMNS = [
+    ("imu_gyro_rad_s", "f8", "rad/s", "tip IMU: rate about z (its edge), as the step read it"),
+    ("imu_accel_x_m_s2", "f8", "m/s^2", "tip IMU: specific force along the rod, toward the tip"),
+    ("imu_accel_y_m_s2", "f8", "m/s^2", "tip IMU: specific force across the rod, toward increasing theta"),
+    ("imu_gyro_bias_rad_s", "f8", "rad/s", "gyro bias: the estimator's in BALANCE, else the mean at rest"),
+    ("imu_encoder_offset_rad", "f8", "rad", "the estimator's encoder offset from the rod's base (BALANCE)"),
+    ("imu_status_bits", "i8", "1", "FRESH 1, GOOD 2, BIAS_KNOWN 4; -1: no IMU frame"),
+    ("imu_bad_run_count", "i8", "1", "unusable IMU samples in a row; -1: no IMU frame"),
+]
+NO_IMU = (math.nan,) * 5 + (-1, -1)
+
 EVENT_COLUMNS = [
     ("time_s", "f8", "s", "device clock on the telemetry's time axis"),
     ("host_time_s", "f8", "s", "host receive time"),
@@ -52,7 +64,8 @@ def columns(n: int) -> list[tuple[str, str, str, str]]:
     return (BASE_COLUMNS
             + [(f"theta_hat_{i}_rad", "f8", "rad", f"estimated absolute angle of edge {i} (0 hanging, pi upright)")
                for i in range(1, n + 1)]
-            + [(f"rate_hat_{i}_rad_s", "f8", "rad/s", f"estimated rate of edge {i}") for i in range(1, n + 1)])
+            + [(f"rate_hat_{i}_rad_s", "f8", "rad/s", f"estimated rate of edge {i}") for i in range(1, n + 1)]
+            + IMU_COLUMNS)
 
 
 def column_names(n: int) -> list[str]:
@@ -60,7 +73,7 @@ def column_names(n: int) -> list[str]:
 
 
 def dtype_of(name: str) -> str:
-    for c in BASE_COLUMNS + EVENT_COLUMNS:
+    for c in BASE_COLUMNS + IMU_COLUMNS + EVENT_COLUMNS:
         if c[0] == name:
             return c[1]
     return "f8"

@@ -115,6 +115,8 @@ class LogWriter:
         self.clock = schema.DeviceClock()
         self._last_mode: tuple[int, int] | None = None
         self._buf: list[tuple] = []
+        self._held: tuple | None = None  # the latest telemetry row, waiting for its IMU frame
+        self.imu_unmatched = 0  # IMU frames that followed no telemetry row
         self._ebuf: list[tuple] = []
         self._lock = threading.Lock()
         self._last_flush = time.monotonic()
@@ -149,7 +151,9 @@ class LogWriter:
                    _name(_REASON_NAMES, reason), int(msg.flags), int(msg.encoder_count), float(msg.base_rate),
                    float(msg.torque), float(msg.duty), int(msg.step_us), int(msg.overruns),
                    int(msg.frames_dropped), int(msg.rx_errors)) + th + rt
-            self._buf.append(row)
+            if self._held is not None:
+                self._buf.append(self._held)
+            self._held = row + schema.NO_IMU
             self.rows += 1
             if (mode, reason) != self._last_mode:
                 what = ("start in " if self._last_mode is None else f"{_name(_MODE_NAMES, self._last_mode[0])} -> ")
@@ -189,6 +193,20 @@ class LogWriter:
                f"{_name({int(r): r.name for r in P.AckResult}, msg.result)}"
         self._event(time_us, host_time_s, seq, "ACK", msg.mode, None, info)
 
+    def write_imu(self, msg, seq: int, time_us: int, host_time_s: float = _NAN) -> None:
+        """The IMU frame that follows a telemetry frame (seq + 1): its columns join that row."""
+        with self._lock:
+            self.clock(time_us)
+            held = self._held
+            if held is None or held[2] != int(seq) - 1:
+                self.imu_unmatched += 1
+                return
+            imu = (float(msg.gyro), float(msg.accel_x), float(msg.accel_y), float(msg.gyro_bias),
+                   float(msg.encoder_offset), int(msg.status), int(msg.bad_run))
+            self._buf.append(held[:-len(imu)] + imu)
+            self._held = None
+            self._added()
+
     def note(self, text: str, host_time_s: float = _NAN) -> None:
         """A host event (e.g. "recording started"), at the device time of the latest frame."""
         mode, reason = self._last_mode or (0, 0)
@@ -203,6 +221,8 @@ class LogWriter:
             self.write_hello(frame.msg, frame.seq, frame.time_us, host_time_s)
         elif t == P.MsgType.ACK:
             self.write_ack(frame.msg, frame.seq, frame.time_us, host_time_s)
+        elif t == P.MsgType.IMU:
+            self.write_imu(frame.msg, frame.seq, frame.time_us, host_time_s)
         else:  # a host->device type from a device: still recorded
             self._event(frame.time_us, host_time_s, frame.seq, "NOTE", 0, None, f"unexpected {t!r}: {frame.msg!r}")
 
@@ -222,22 +242,34 @@ class LogWriter:
         self._last_flush = time.monotonic()
 
     def flush(self) -> None:
+        """Write everything received so far (the latest row too, without waiting for its IMU frame)."""
         with self._lock:
             if not self.closed:
+                if self._held is not None:
+                    self._buf.append(self._held)
+                    self._held = None
                 self._flush_locked()
 
     def maybe_flush(self) -> None:
+        """The periodic write: the latest row stays back for its IMU frame."""
         if time.monotonic() - self._last_flush >= self.flush_interval:
-            self.flush()
+            with self._lock:
+                if not self.closed:
+                    self._flush_locked()
 
     def close(self, trailer: dict | None = None) -> Path:
         """Write what is left and the trailer (counters). Returns the log path."""
         with self._lock:
             if self.closed:
                 return self.path
+            if self._held is not None:
+                self._buf.append(self._held)
+                self._held = None
             self._flush_locked()
             tr = {"closed_utc": utc_now(), "rows": str(self.rows), "events": str(self.events),
                   "heartbeat_acks": str(self.heartbeat_acks)}
+            if self.imu_unmatched:
+                tr["imu_unmatched"] = str(self.imu_unmatched)
             tr.update({k: str(v) for k, v in (trailer or {}).items()})
             try:
                 self._sink.close(tr)

@@ -33,6 +33,7 @@ import shutil
 import tempfile
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable
 
@@ -59,6 +60,7 @@ def _prototype(lib: ctypes.CDLL) -> ctypes.CDLL:
         "rod_dev_read": (sz, [ctypes.c_void_p, sz]),
         "rod_dev_load_rig": (None, [ctypes.c_char_p, sz]),
         "rod_dev_take_save": (sz, [ctypes.c_void_p, sz]),
+        "rod_dev_imu": (None, [f, f, f, i]),
     }
     for name, (res, args) in protos.items():
         fn = getattr(lib, name)
@@ -134,6 +136,9 @@ class VirtualDevice:
             rod = self.params.with_overrides(*shorthand) if shorthand else self.params
             self.plant = faithful_plant(rod, input_mode="duty")
             plant = rod["plant"]["model"]
+        imu = self.plant.config.imu
+        if self.faults.imu_tilt_deg and imu is not None:
+            self.plant = self.plant.twin(imu=replace(imu, tilt=imu.tilt + math.radians(self.faults.imu_tilt_deg)))
         if self.theta0_deg:
             self.plant.set_state(math.radians(self.theta0_deg))
         self.kind = plant
@@ -233,6 +238,9 @@ class VirtualDevice:
                 tq = 0.0
             plant.external_torque = tq
         count = self._encoder_count()
+        if plant.config.imu is not None:
+            sample = plant.imu_read(self.period)
+            lib.rod_dev_imu(*(sample or (0.0, 0.0, 0.0)), 1 if sample else 0)
         lib.rod_dev_step(count, (self.steps * self.period_us) & 0xFFFFFFFF, 0, 1 if f.nfault_low else 0)
         duty = lib.rod_dev_duty() if lib.rod_dev_enable() else 0.0
         if not math.isfinite(duty) or f.supply_off:

@@ -14,6 +14,7 @@ firmware's host build, where the board layer would see it:
                          so its zero is there: hanging reads -X
     header=stale         the firmware was built from another design than the parameter file's
     hand=none            nobody stands by the virtual rod (steps that need a hand wait for a human)
+    imu_tilt_deg=X       the tip IMU sits X deg more tilted on the rod than sensors.imu_tilt_deg says
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from dataclasses import dataclass
 from rodgains.errors import InputError
 
 FAULT_OPTIONS = ("encoder_sign", "motor_sign", "encoder", "ab_swapped", "counts_per_rev", "nfault", "supply",
-                 "boot_angle_deg", "header", "hand")
+                 "boot_angle_deg", "header", "hand", "imu_tilt_deg")
 
 # header=stale: the board's firmware was designed for a rod 20 % stiffer than the parameter file says
 STALE_OVERRIDE_KEY = "rod.youngs_modulus"
@@ -49,6 +50,7 @@ class Faults:
     boot_angle_deg: float = 0.0
     header_stale: bool = False
     hand: bool = True  # a virtual hand can turn the rod (VirtualDevice.hand_turn)
+    imu_tilt_deg: float = 0.0  # the tip IMU's mounting tilt beyond the design's [deg]
 
     @classmethod
     def from_options(cls, opts: dict[str, str]) -> "Faults":
@@ -73,6 +75,8 @@ class Faults:
             kw["hand"] = _choice("hand", opts["hand"], {"virtual": True, "none": False})
         if "counts_per_rev" in opts:
             kw["counts_per_rev"] = _number("counts_per_rev", opts["counts_per_rev"], 1.0, 1e7, "counts per output turn")
+        if "imu_tilt_deg" in opts:
+            kw["imu_tilt_deg"] = _number("imu_tilt_deg", opts["imu_tilt_deg"], -90.0, 90.0, "deg")
         if "boot_angle_deg" in opts:
             kw["boot_angle_deg"] = _number("boot_angle_deg", opts["boot_angle_deg"], -180.0, 180.0, "deg")
         return cls(**kw)
@@ -106,6 +110,8 @@ class Faults:
             parts.append(f"booted with the rod at {self.boot_angle_deg:g} deg")
         if self.header_stale:
             parts.append("firmware of another design")
+        if self.imu_tilt_deg:
+            parts.append(f"tip IMU tilted {self.imu_tilt_deg:g} deg more than designed")
         return ", ".join(parts)
 
 

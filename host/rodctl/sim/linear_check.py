@@ -17,9 +17,11 @@ import numpy as np
 from rodgains import sampled
 from rodgains.buckling import clamped_ratio
 from rodgains.design import Design
+from rodgains.imu import closed_loop as imu_closed_loop
 from rodgains.trim import trim_gains
 
 from rodctl.sim import convergence, matrix
+from rodctl.sim.imu import linear_rows
 from rodctl.sim.plant import Plant, faithful_plant
 
 LINEAR_CASES = ("E+15", "E-15", "rho+15", "rho-15", "damping*0.1", "damping*10", "viscous*3", "J+30", "J-30",
@@ -38,9 +40,10 @@ def _radius(M: np.ndarray) -> float:
     return float(off.max()) if off.size else 1.0
 
 
-def linear_plant(plant_p) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def linear_plant(plant_p, imu: bool = False):
     """(A, B, C) of the faithful plant of plant_p linearized upright: torque input through the winding's
-    current lag (L / R), no dry friction, the gear teeth in contact, output the encoder's angle."""
+    current lag (L / R), no dry friction, the gear teeth in contact, output the encoder's angle. imu: also
+    (C_imu, D_imu), the tip IMU's rows (rodctl.sim.imu.linear_rows), appended to the return."""
     pl = faithful_plant(plant_p, input_mode="torque", coulomb=0.0)
     if pl.config.backlash > 0:
         pl = pl.twin(backlash=0.0)
@@ -48,23 +51,49 @@ def linear_plant(plant_p) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     n = A.shape[0]
     C = np.zeros((1, n))
     C[0, pl.encoder_index] = 1.0
+    extra = ()
+    if imu:
+        y0 = convergence.hanging_equilibrium(pl, True)
+        Ci, Di = linear_rows(pl, y0, A, B, pl.config.imu.position, pl.config.g)
+        extra = (Ci, Di)
     L, R = plant_p["motor"]["inductance"], plant_p["motor"]["resistance"]
     if L > 0:  # the torque follows the command through the current's first-order lag
         tau = L / R
+        if imu:  # the IMU's torque feedthrough now comes through the current state
+            Ci, Di = extra
+            extra = (np.hstack([Ci, Di]), np.zeros_like(Di))
         A = np.block([[A, B], [np.zeros((1, n)), np.full((1, 1), -1.0 / tau)]])
         B = np.vstack([np.zeros((n, 1)), [[1.0 / tau]]])
         C = np.hstack([C, [[0.0]]])
-    return A, B, C
+    return (A, B, C, *extra)
 
 
 def loop_radius(d: Design, plant_p, delay_periods: int = 0, actuator_gain: float = 1.0) -> float:
     """Spectral radius of the sampled loop: faithful plant of plant_p (linear_plant) with d's estimator
     and LQR."""
+    if d.imu is not None:
+        A, B, C, Ci, Di = linear_plant(plant_p, imu=True)
+        Ad, Bd = sampled.zoh(A, B, d.dt)
+        E = np.zeros((1, Ad.shape[0]))
+        E[0] = C[0]
+        return _radius(_imu_loop(d, Ad, Bd, E, Ci, Di, actuator_gain, delay_periods))
     A, B, C = linear_plant(plant_p)
     Ad, Bd = sampled.zoh(A, B, d.dt)
     Ao, Bo, Co, Ko, Lo = d.estimator()
     return _radius(sampled.closed_loop(Ad, Bd, C, Ko, Lo, Ad_obs=Ao, Bd_obs=Bo, actuator_gain=actuator_gain, C_obs=Co,
                                        delay=delay_periods))
+
+
+def _imu_loop(d: Design, Ad, Bd, C_enc, C_imu, D_imu, actuator_gain, delay):
+    """The loop with the tip IMU on a plant (Ad, Bd) whose encoder row is C_enc, IMU rows C_imu, D_imu. The
+    IMU reads one sample old like the design's (ImuEstimator.plant), the D term included."""
+    im = d.imu
+    Ao, Bo, Co, Do = im.full(d.Ad, d.Bd, d.w_decay)
+    Lo = np.vstack([im.L, im.Lw[None, :], im.La])
+    Ko = np.hstack([d.K, [[1.0]], np.zeros((1, im.NA))])
+    Ap, Bp, Cp, Dp = im.plant(Ad, Bd, C_imu, D_imu)
+    Cp[0, :Ad.shape[0]] = C_enc[0]
+    return imu_closed_loop(Ap, Bp, Cp, Dp, Ao, Bo, Co, Do, Ko, Lo, actuator_gain, delay)
 
 
 def corner_radii(d: Design) -> list[tuple[str, float, float]]:

@@ -48,6 +48,7 @@ from rodgains.params import Params, load_params
 from rodgains.rod_model import DAMPING_REFERENCE_EDGES, RodModel
 
 from rodctl.build.native import compile_shared
+from rodctl.sim.imu import NO_IMU_FIELDS, ImuConfig
 
 NATIVE = Path(__file__).resolve().parent / "native"
 SOURCES = [NATIVE / "rod_plant.c"]
@@ -108,13 +109,27 @@ class _Config(ctypes.Structure):
         ("zero_error", _D),
         ("rest_curvature", _D),
         ("encoder_on_shaft", ctypes.c_int32),
+        ("imu_on", ctypes.c_int32),
+        ("imu_mass", _D),
+        ("imu_position", _D),
+        ("imu_gyro_sigma", _D),
+        ("imu_accel_sigma", _D),
+        ("imu_gyro_bias", _D),
+        ("imu_bias_step", _D),
+        ("imu_gyro_lsb", _D),
+        ("imu_accel_lsb", _D),
+        ("imu_delay", ctypes.c_int32),
+        ("imu_seed", ctypes.c_uint32),
+        ("imu_fault_time", _D),
+        ("imu_fault", ctypes.c_int32),
         ("reserved", ctypes.c_int32),
+        ("imu_tilt", _D),
     ]
 
 
 class _SilApi(ctypes.Structure):
     _fields_ = [("reset", ctypes.c_void_p), ("arm", ctypes.c_void_p), ("step", ctypes.c_void_p),
-                ("status", ctypes.c_void_p), ("duty", ctypes.c_void_p)]
+                ("status", ctypes.c_void_p), ("duty", ctypes.c_void_p), ("imu", ctypes.c_void_p)]
 
 
 class _RunOptions(ctypes.Structure):
@@ -144,6 +159,7 @@ class _RunLog(ctypes.Structure):
         ("mode", _P(ctypes.c_int32)),
         ("count", _P(ctypes.c_int32)),
         ("motor", _P(_D)),
+        ("imu", _P(ctypes.c_float)),
     ]
 
 
@@ -198,13 +214,14 @@ def library() -> ctypes.CDLL:
         "rod_plant_motor_state": (None, [vp, dp, dp, dp]),
         "rod_plant_set_motor_state": (ctypes.c_int, [vp, _D, _D, _D]),
         "rod_plant_gear_torque": (_D, [vp]),
+        "rod_plant_imu_read": (ctypes.c_int, [vp, _D, _P(ctypes.c_float)]),
         "rod_run_closed_loop": (ctypes.c_int64, [vp, _P(_SilApi), _P(_RunOptions), _P(_RunLog), _P(_RunResult)]),
     }
     for name, (res, args) in sig.items():
         f = getattr(lib, name)
         f.restype = res
         f.argtypes = args
-    if lib.rod_plant_api_version() != 3:
+    if lib.rod_plant_api_version() != 4:
         raise UserError("rod_plant library API version mismatch")
     return lib
 
@@ -263,6 +280,7 @@ class PlantConfig:
     zero_error: float = 0.0  # the encoder reads the angle plus this [rad]
     rest_curvature: float = 0.0  # the rod's curvature at rest [1/m]
     encoder_on_shaft: bool = False  # the encoder reads theta_1 (an output-shaft encoder), not the motor side
+    imu: ImuConfig | None = None  # a tip IMU on the rod (its mass, its readings to the controller)
 
     @property
     def back_emf_damping(self) -> float:
@@ -276,7 +294,7 @@ class PlantConfig:
                        self.hub_length, self.hub_mass, self.hub_stiffness, self.hub_damping, self.coulomb,
                        self.coulomb_rate, self.gear_stiffness, self.gear_damping, self.backlash, self.output_inertia,
                        self.output_viscous, self.inductance, self.zero_error, self.rest_curvature,
-                       int(self.encoder_on_shaft), 0)
+                       int(self.encoder_on_shaft), *(self.imu.c_fields() if self.imu else NO_IMU_FIELDS))
 
     @property
     def compliant(self) -> bool:
@@ -335,7 +353,8 @@ class Plant:
                  d: float | None = None, g: float | None = None, method: str = "auto", step: float | None = None,
                  period: float | None = None, hub_length: float | None = None, coulomb: float = 0.0,
                  gear: GearTrain | None = None, inductance: float = 0.0, zero_error: float = 0.0,
-                 rest_curvature: float = 0.0, jitter: float = 0.0, encoder_on_shaft: bool = False):
+                 rest_curvature: float = 0.0, jitter: float = 0.0, encoder_on_shaft: bool = False,
+                 imu: ImuConfig | None = None):
         if kind not in KINDS:
             raise ValueError(f"kind must be one of {sorted(KINDS)}, got {kind!r}")
         if input_mode not in INPUTS:
@@ -382,7 +401,7 @@ class Plant:
             counts_per_rev=float(p.counts_per_rev), encoder_phase=float(phase), hub_length=geo["hub_length"],
             hub_mass=geo["hub_mass"], hub_stiffness=geo["hub_stiffness"], hub_damping=geo["hub_damping"],
             coulomb=float(coulomb), inductance=float(inductance), zero_error=float(zero_error),
-            rest_curvature=float(rest_curvature), encoder_on_shaft=bool(encoder_on_shaft), **gear_kw)
+            rest_curvature=float(rest_curvature), encoder_on_shaft=bool(encoder_on_shaft), imu=imu, **gear_kw)
         self._lib = library()
         cfg = self.config.to_c(1e-4, "verlet" if kind == "der" else "ros2")
         self._h = self._lib.rod_plant_new(ctypes.byref(cfg))
@@ -609,6 +628,13 @@ class Plant:
     def encoder(self) -> int:
         return self._lib.rod_plant_encoder(self._h)
 
+    def imu_read(self, period: float) -> tuple[float, float, float] | None:
+        """The tip IMU's sample a control step reads now (gyro [rad/s], accel x, y [m/s^2]), for a caller that
+        advances the plant one period at a time; None when none came (or the plant has no IMU)."""
+        out = (ctypes.c_float * 3)()
+        r = self._lib.rod_plant_imu_read(self._h, float(period), out)
+        return (out[0], out[1], out[2]) if r == 1 else None
+
     def encoder_count(self, theta1: float) -> int:
         return self._lib.rod_plant_encoder_count(self._h, float(theta1))
 
@@ -732,7 +758,8 @@ def faithful_plant(params: Params, *, input_mode: str = "duty", phase: float = 0
                 gear=GearTrain.from_params(params), inductance=params["motor"]["inductance"],
                 zero_error=math.radians(params["encoder"]["zero_error_deg"]),
                 rest_curvature=params["rod"]["rest_curvature"], jitter=1e-6 * pp["isr_jitter_us"],
-                encoder_on_shaft=params["encoder"]["location"] == "output")
+                encoder_on_shaft=params["encoder"]["location"] == "output",
+                imu=ImuConfig.from_params(params) if params["sensors"]["tip_imu"] else None)
     args.update(kw)
     return Plant(params, **args)
 
@@ -765,9 +792,11 @@ class SilController:
         if not 1 <= self.edges <= 128:
             raise UserError(f"{self.path}: rod_sil_edges() = {self.edges}")
         self.has_duty = hasattr(L, "rod_sil_duty")
+        self.has_imu = hasattr(L, "rod_sil_imu")
         addr = lambda name: ctypes.cast(getattr(L, name), ctypes.c_void_p).value  # noqa: E731
         self.api = _SilApi(addr("rod_sil_reset"), addr("rod_sil_arm"), addr("rod_sil_step"), addr("rod_sil_status"),
-                           addr("rod_sil_duty") if self.has_duty else None)
+                           addr("rod_sil_duty") if self.has_duty else None,
+                           addr("rod_sil_imu") if self.has_imu else None)
 
     @property
     def path(self) -> str:
@@ -793,7 +822,8 @@ def run_closed_loop(plant: Plant, sil, periods: int, arm_mode: int = 0, delay_pe
     (true, plant N), est (controller's status: theta-hat_1..Nc then rates, float32), torque_cmd
     (float32), duty (float32), torque and current (mean applied over the period), mode, count
     (int32); and scalars periods_run, nonfinite_commands, stopped_on_mode, period, controller_edges,
-    plant_edges; motor: the motor side's angle at each encoder read [rad] (theta_1 when rigid).
+    plant_edges; motor: the motor side's angle at each encoder read [rad] (theta_1 when rigid); imu: the
+    tip IMU's sample given to each step (gyro [rad/s], accelerometer x, y [m/s^2]; NaN without one).
     jitter [s] (default: the plant's): the encoder read and the new command come j_k late, j_k uniform in
     [0, jitter) from the seeded sequence jitter_seed (reset=True restarts it). If the plant fails (its
     state left the model), SimulationError carries the log up to and including the failed period. The
@@ -820,11 +850,13 @@ def run_closed_loop(plant: Plant, sil, periods: int, arm_mode: int = 0, delay_pe
         "mode": np.zeros(periods, np.int32),
         "count": np.zeros(periods, np.int32),
         "motor": np.zeros(periods),
+        "imu": np.full((periods, 3), np.nan, np.float32),
     }
     log = _RunLog(_ptr(out["time"], _D), _ptr(out["theta"], _D), _ptr(out["dtheta"], _D),
                   _ptr(out["est"], ctypes.c_float), _ptr(out["torque_cmd"], ctypes.c_float),
                   _ptr(out["duty"], ctypes.c_float), _ptr(out["torque"], _D), _ptr(out["current"], _D),
-                  _ptr(out["mode"], ctypes.c_int32), _ptr(out["count"], ctypes.c_int32), _ptr(out["motor"], _D))
+                  _ptr(out["mode"], ctypes.c_int32), _ptr(out["count"], ctypes.c_int32), _ptr(out["motor"], _D),
+                  _ptr(out["imu"], ctypes.c_float))
     jit = plant.jitter if jitter is None else float(jitter)
     if not 0.0 <= jit < ctl.period:
         raise ValueError(f"jitter must be in [0, {ctl.period:g}) s, got {jit!r}")

@@ -17,6 +17,7 @@
 #pragma GCC diagnostic ignored "-Wcast-function-type"
 #include <Arduino.h>
 #include <IntervalTimer.h>
+#include <SPI.h>
 #include <avr/eeprom.h>
 #pragma GCC diagnostic pop
 

@@ -16,6 +16,24 @@
 #define BOARD_PIN_NFAULT 8  // PTD3, open drain from the driver: INPUT_PULLUP, low = fault
 #define BOARD_PIN_LED 13    // PTC5, on-board LED
 
+// Tip IMU (ICM-42688-P), SPI0; used only by a firmware designed with sensors.tip_imu. SCK moves to
+// its alternate pin 14 (PTD1) because 13 is the LED.
+#define BOARD_PIN_IMU_CS 10    // PTC4, GPIO chip select
+#define BOARD_PIN_IMU_MOSI 11  // PTC6 = SPI0_SOUT
+#define BOARD_PIN_IMU_MISO 12  // PTC7 = SPI0_SIN
+#define BOARD_PIN_IMU_SCK 14   // PTD1 = SPI0_SCK (alternate)
+#define BOARD_IMU_SPI_HZ 8000000u  // the part takes 24 MHz; 8 MHz keeps the flex cable to the tip clean
+// The part's axes (0 x, 1 y, 2 z) and signs that give the rod's frame (rod_io.h): x along the rod
+// toward the tip, y toward increasing theta, gyro z = d theta / dt. As mounted on the flex with the
+// part's x toward the tip and its z out of the swing plane toward the viewer; `rodctl identify
+// --imu` checks them on the hanging rod.
+#define BOARD_IMU_X_AXIS 0
+#define BOARD_IMU_X_SIGN 1.0f
+#define BOARD_IMU_Y_AXIS 1
+#define BOARD_IMU_Y_SIGN 1.0f
+#define BOARD_IMU_Z_AXIS 2
+#define BOARD_IMU_Z_SIGN 1.0f
+
 // The wiring's signs when the board has none stored: theta_1 and the count must rise together, and
 // a positive duty must accelerate theta_1 positively. `rodctl check --fix` measures them and stores
 // them on the board (SAVE_RIG), which then wins over these; the core applies them (rod_rig.h).

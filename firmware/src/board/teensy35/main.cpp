@@ -15,6 +15,7 @@
 
 #include <math.h>
 
+#include "board_imu.h"
 #include "board_pins.h"
 #include "board_quadrature.h"
 #include "board_storage.h"
@@ -83,6 +84,7 @@ static void control_step()
     in.last_step_us = last_step_us;
     bool edge = nfault_seen;
     in.driver_fault = edge || digitalReadFast(BOARD_PIN_NFAULT) == LOW;
+    board_imu_take(&in.imu);
 
     rod_outputs_t out;
     rod_device_step(&device, &in, &out);
@@ -90,6 +92,7 @@ static void control_step()
         nfault_seen = false;  // reported: the core has latched FAULT and disabled the outputs
     }
     apply(out);
+    board_imu_start();  // the next step's sample, read while this period runs on
 
     steps_run = steps_run + 1;
     last_step_us = (ARM_DWT_CYCCNT - start) / (F_CPU / 1000000u);
@@ -250,6 +253,7 @@ void setup()
     ARM_DWT_CTRL |= ARM_DWT_CTRL_CYCCNTENA;
 
     board_quadrature_begin();
+    (void)board_imu_begin();  // a missing part leaves every sample "none": the core trips IMU if armed
     // May block for up to about 2 s on some Teensyduino cores (1.62 waits for a host to open the
     // port; other versions return at once). Nothing depends on it: the driver is already off
     // (nEN high above), the control timer and watchdog start after it, and every USB call in

@@ -105,9 +105,21 @@ struct rod_plant {
     /* DER workspace */
     double *Fc, *Cb, *Ab, *x, *w, *vh, *X, *E, *ge, *rr, *rl;
     double *tmp; /* 2n scratch for deriv/force */
+    /* the IMU (cfg.imu_on) */
+    int imu_edge;       /* the edge its centre lies on (0-based) */
+    double imu_frac;    /* how far along it [-] */
+    int imu_primed;     /* the previous read's kinematics are valid */
+    double imu_th, imu_vx, imu_vy; /* at the previous read: edge angle [rad], site velocity [m/s] */
+    double imu_bias;    /* the gyro's bias now [rad/s] */
+    uint32_t imu_rng;
+    float imu_ring[ROD_IMU_MAX_DELAY + 1][3];
+    int imu_count;      /* samples made so far */
+    float imu_stuck[3];
 };
 
 int rod_plant_api_version(void) { return ROD_PLANT_API_VERSION; }
+
+static void imu_reset(rod_plant *p);
 
 /* ------------------------------------------------------------------------------------------ */
 /* motor and driver                                                                            */
@@ -978,6 +990,11 @@ static int config_ok(const rod_plant_config *k)
           isfinite(k->zero_error) && isfinite(k->rest_curvature)))
         return 0;
     if (k->gear_stiffness > 0 && !(k->J > 0)) return 0; /* the motor side needs its inertia */
+    if (k->imu_on && !(k->imu_mass >= 0 && k->imu_position > 0 && k->imu_gyro_sigma >= 0 && k->imu_accel_sigma >= 0
+                       && k->imu_bias_step >= 0 && k->imu_gyro_lsb > 0 && k->imu_accel_lsb > 0
+                       && isfinite(k->imu_gyro_bias) && isfinite(k->imu_tilt) && k->imu_delay >= 0 && k->imu_delay <= ROD_IMU_MAX_DELAY
+                       && k->imu_fault >= 0 && k->imu_fault <= ROD_IMU_FAULT_RANGE))
+        return 0;
     if (k->gear_stiffness > 0 && !(k->hub_length > 0 || k->output_inertia > 0)) return 0;
     return 1;
 }
@@ -1076,10 +1093,29 @@ rod_plant *rod_plant_new(const rod_plant_config *cfg)
          * which its stiffness EI / l_v carries */
         p->kbar[i] = i < N - 1 ? 2.0 * tan(0.5 * cfg->rest_curvature * cfg->EI / p->ksj[i]) : 0.0;
     }
+    /* the IMU's site: the edge spanning its arc length; its mass split between that edge's nodes */
+    double imu_node[2] = {0.0, 0.0};
+    p->imu_edge = N - 1;
+    p->imu_frac = 1.0;
+    if (cfg->imu_on) {
+        double s0 = 0.0;
+        for (int i = 0; i < N; i++) {
+            if (cfg->imu_position <= s0 + p->lv[i] || i == N - 1) {
+                p->imu_edge = i;
+                p->imu_frac = fmin(fmax((cfg->imu_position - s0) / p->lv[i], 0.0), 1.0);
+                break;
+            }
+            s0 += p->lv[i];
+        }
+        imu_node[0] = (1.0 - p->imu_frac) * cfg->imu_mass;
+        imu_node[1] = p->imu_frac * cfg->imu_mass;
+    }
     if (cfg->kind == ROD_PLANT_INEXTENSIBLE) {
         for (int i = 0; i < N; i++) p->mn[i] = cfg->m; /* node i + 1 */
         p->mn[0] = 0.5 * (cfg->hub_mass + cfg->m);
         p->mn[N - 1] = 0.5 * cfg->m;
+        if (p->imu_edge >= 1) p->mn[p->imu_edge - 1] += imu_node[0]; /* node 0 is on the axis */
+        p->mn[p->imu_edge] += imu_node[1];
         double sum = 0.0;
         for (int i = N - 1; i >= 0; i--) {
             sum += p->mn[i];
@@ -1090,6 +1126,8 @@ rod_plant *rod_plant_new(const rod_plant_config *cfg)
         p->cc[0] = 0.5 * cfg->hub_mass;
         p->cc[1] = 0.5 * (cfg->hub_mass + cfg->m);
         p->cc[N] = 0.5 * cfg->m;
+        p->cc[p->imu_edge] += imu_node[0];
+        p->cc[p->imu_edge + 1] += imu_node[1];
         p->md[0] = p->J_shaft + p->cc[1] * cfg->hub_length * cfg->hub_length;
         for (int k = 2; k <= N; k++) p->md[node_index(k)] = p->md[node_index(k) + 1] = p->cc[k];
     }
@@ -1102,6 +1140,7 @@ rod_plant *rod_plant_new(const rod_plant_config *cfg)
         p->q[0] = 0.0;
     }
     if (compliant) p->md[p->im] = cfg->J;
+    imu_reset(p);
     return p;
 }
 
@@ -1149,6 +1188,7 @@ int rod_plant_set_encoder_phase(rod_plant *p, double phase)
 
 int rod_plant_set_raw_state(rod_plant *p, const double *q, const double *qd)
 {
+    p->imu_primed = 0;
     memcpy(p->q, q, sizeof(double) * (size_t)p->n);
     memcpy(p->v, qd, sizeof(double) * (size_t)p->n);
     p->prepared = 0;
@@ -1163,6 +1203,7 @@ void rod_plant_get_raw_state(const rod_plant *p, double *q, double *qd)
 
 int rod_plant_set_state(rod_plant *p, const double *theta, const double *dtheta)
 {
+    p->imu_primed = 0;
     const int N = p->N;
     p->prepared = 0;
     p->cur = 0.0;
@@ -1447,6 +1488,130 @@ int32_t rod_plant_encoder(const rod_plant *p)
 }
 
 /* ------------------------------------------------------------------------------------------ */
+/* the IMU                                                                                      */
+
+/* Angle of the IMU's edge [rad] and its site's velocity [m/s] at the current state. */
+static void imu_site(const rod_plant *p, double *th, double *vx, double *vy)
+{
+    const int j = p->imu_edge;
+    const double *q = p->q, *v = p->v;
+    double ax = 0, ay = 0, avx = 0, avy = 0; /* node j */
+    double bx, by, bvx, bvy;                 /* node j + 1 */
+    if (p->cfg.kind == ROD_PLANT_INEXTENSIBLE) {
+        for (int i = 0; i < j; i++) {
+            const double s = sin(q[i]), c = cos(q[i]);
+            ax += p->lv[i] * s;
+            ay -= p->lv[i] * c;
+            avx += p->lv[i] * v[i] * c;
+            avy += p->lv[i] * v[i] * s;
+        }
+        const double s = sin(q[j]), c = cos(q[j]);
+        bx = ax + p->lv[j] * s;
+        by = ay - p->lv[j] * c;
+        bvx = avx + p->lv[j] * v[j] * c;
+        bvy = avy + p->lv[j] * v[j] * s;
+    } else {
+        const double h = p->cfg.hub_length, s = sin(q[0]), c = cos(q[0]);
+#define NODE(k, X, Y, VX, VY)                                                               \
+    do {                                                                                    \
+        if ((k) == 0) {                                                                     \
+            X = Y = VX = VY = 0.0;                                                          \
+        } else if ((k) == 1) {                                                              \
+            X = h * s, Y = -h * c, VX = h * v[0] * c, VY = h * v[0] * s;                    \
+        } else {                                                                            \
+            const int ni = node_index(k);                                                   \
+            X = q[ni], Y = q[ni + 1], VX = v[ni], VY = v[ni + 1];                           \
+        }                                                                                   \
+    } while (0)
+        NODE(j, ax, ay, avx, avy);
+        NODE(j + 1, bx, by, bvx, bvy);
+#undef NODE
+    }
+    *th = atan2(bx - ax, -(by - ay));
+    *vx = avx + p->imu_frac * (bvx - avx);
+    *vy = avy + p->imu_frac * (bvy - avy);
+}
+
+static double imu_uniform(rod_plant *p)
+{
+    uint32_t r = p->imu_rng;
+    r ^= r << 13;
+    r ^= r >> 17;
+    r ^= r << 5;
+    p->imu_rng = r;
+    return ((double)r + 0.5) / 4294967296.0;
+}
+
+static double imu_normal(rod_plant *p)
+{
+    const double u1 = imu_uniform(p), u2 = imu_uniform(p);
+    return sqrt(-2.0 * log(u1)) * cos(ROD_TWO_PI * u2);
+}
+
+static float imu_quantize(double x, double lsb)
+{
+    double k = nearbyint(x / lsb);
+    if (k > 32767.0) k = 32767.0;
+    if (k < -32768.0) k = -32768.0;
+    return (float)(k * lsb);
+}
+
+/* The sample the controller reads at this period's start (period [s]); out = gyro, accel x, y. Returns
+ * whether one came. */
+static int imu_read(rod_plant *p, double period, double run_time, float out[3])
+{
+    const rod_plant_config *k = &p->cfg;
+    double th, vx, vy;
+    imu_site(p, &th, &vx, &vy);
+    if (!p->imu_primed) {
+        p->imu_th = th, p->imu_vx = vx, p->imu_vy = vy;
+        p->imu_primed = 1;
+    }
+    /* the period's means: the rate from the angle's change, the acceleration from the velocity's */
+    const double rate = remainder(th - p->imu_th, ROD_TWO_PI) / period;
+    const double fx = (vx - p->imu_vx) / period, fy = (vy - p->imu_vy) / period + k->g;
+    const double mid = p->imu_th + 0.5 * remainder(th - p->imu_th, ROD_TWO_PI);
+    p->imu_th = th, p->imu_vx = vx, p->imu_vy = vy;
+    const double sx = sin(mid + k->imu_tilt), cx = cos(mid + k->imu_tilt);
+    p->imu_bias += k->imu_bias_step * imu_normal(p);
+    float now[3];
+    now[0] = imu_quantize(rate + p->imu_bias + k->imu_gyro_sigma * imu_normal(p), k->imu_gyro_lsb);
+    now[1] = imu_quantize(fx * sx - fy * cx + k->imu_accel_sigma * imu_normal(p), k->imu_accel_lsb);
+    now[2] = imu_quantize(fx * cx + fy * sx + k->imu_accel_sigma * imu_normal(p), k->imu_accel_lsb);
+    const int slot = p->imu_count % (ROD_IMU_MAX_DELAY + 1);
+    memcpy(p->imu_ring[slot], now, sizeof now);
+    p->imu_count++;
+    if (p->imu_count <= k->imu_delay) return 0; /* nothing has come through the pipeline yet */
+    const int old = (p->imu_count - 1 - k->imu_delay) % (ROD_IMU_MAX_DELAY + 1);
+    memcpy(out, p->imu_ring[old], sizeof(float) * 3);
+    if (k->imu_fault != ROD_IMU_FAULT_NONE && run_time >= k->imu_fault_time) {
+        if (k->imu_fault == ROD_IMU_FAULT_SILENT) return 0;
+        if (k->imu_fault == ROD_IMU_FAULT_STUCK) {
+            if (!isnan(p->imu_stuck[0])) memcpy(out, p->imu_stuck, sizeof p->imu_stuck);
+            else memcpy(p->imu_stuck, out, sizeof p->imu_stuck);
+        } else {
+            out[0] = imu_quantize(1e30, k->imu_gyro_lsb);
+        }
+    }
+    return 1;
+}
+
+int rod_plant_imu_read(rod_plant *p, double period, float out[3])
+{
+    if (!p->cfg.imu_on || !(period > 0)) return -1;
+    return imu_read(p, period, p->t, out);
+}
+
+static void imu_reset(rod_plant *p)
+{
+    p->imu_primed = 0;
+    p->imu_count = 0;
+    p->imu_bias = p->cfg.imu_gyro_bias;
+    p->imu_rng = p->cfg.imu_seed ? p->cfg.imu_seed : 0x2545F491u;
+    p->imu_stuck[0] = p->imu_stuck[1] = p->imu_stuck[2] = NAN;
+}
+
+/* ------------------------------------------------------------------------------------------ */
 /* closed loop                                                                                  */
 
 int64_t rod_run_closed_loop(rod_plant *p, const rod_sil_api *api, const rod_run_options *opt,
@@ -1469,6 +1634,7 @@ int64_t rod_run_closed_loop(rod_plant *p, const rod_sil_api *api, const rod_run_
         p->pending = 0.0;
         p->jit = 0.0;
         p->rng = opt->jitter_seed ? opt->jitter_seed : 0x9E3779B9u;
+        imu_reset(p);
         if (opt->arm_mode != 0) api->arm(opt->arm_mode);
     }
     const double t0 = p->t - p->jit; /* the grid: the plant may sit a jitter past it */
@@ -1477,6 +1643,14 @@ int64_t rod_run_closed_loop(rod_plant *p, const rod_sil_api *api, const rod_run_
         if (log->time) log->time[k] = t0 + (double)k * period;
         if (log->motor) log->motor[k] = p->q[p->im >= 0 ? p->im : 0];
         state_angles(p, p->q, p->v, log->theta ? log->theta + k * N : NULL, log->dtheta ? log->dtheta + k * N : NULL);
+        if (p->cfg.imu_on) {
+            float imu[3] = {NAN, NAN, NAN};
+            const int fresh = imu_read(p, period, p->t, imu);
+            if (api->imu) api->imu(imu[0], imu[1], imu[2], fresh);
+            if (log->imu) {
+                for (int j = 0; j < 3; j++) log->imu[3 * k + j] = fresh ? imu[j] : NAN;
+            }
+        }
         const float cmd = api->step(count);
         const float duty = api->duty ? api->duty() : 0.0f;
         for (int j = 0; j < ne; j++) est[j] = NAN;

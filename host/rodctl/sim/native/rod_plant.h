@@ -55,7 +55,7 @@
 extern "C" {
 #endif
 
-#define ROD_PLANT_API_VERSION 3
+#define ROD_PLANT_API_VERSION 4
 
 enum { ROD_PLANT_INEXTENSIBLE = 0, ROD_PLANT_DER = 1 };
 enum { ROD_INPUT_TORQUE = 0, ROD_INPUT_DUTY = 1 };
@@ -113,8 +113,30 @@ typedef struct {
     double zero_error;       /* the encoder reads the angle plus this [rad] */
     double rest_curvature;   /* curvature of the rod at rest [1/m] (0: straight) */
     int32_t encoder_on_shaft; /* 1: the encoder reads theta_1 (an output-shaft encoder), 0: the motor side */
+    int32_t imu_on;          /* 1: a 6-axis IMU on the rod (its mass on the rod, its readings to the controller) */
+    /* The IMU (imu_on): at arc length imu_position from the axis, on the edge that spans it. Sensor frame
+     * x along the rod toward the tip, y its normal toward increasing theta, gyro z = that edge's rate.
+     * Each period's sample is the mean over the period that ended imu_delay periods before the read (the
+     * part's decimation filter, then the pipelined read), plus white noise, the gyro's bias (a random
+     * walk from imu_gyro_bias), rounding to one LSB and clipping at +-32768 LSB. */
+    double imu_mass;         /* [kg] */
+    double imu_position;     /* [m] from the motor axis along the rod */
+    double imu_gyro_sigma;   /* white noise per sample [rad/s] */
+    double imu_accel_sigma;  /* [m/s^2] */
+    double imu_gyro_bias;    /* turn-on bias [rad/s] */
+    double imu_bias_step;    /* the bias's random-walk step per period [rad/s] */
+    double imu_gyro_lsb;     /* [rad/s] */
+    double imu_accel_lsb;    /* [m/s^2] */
+    int32_t imu_delay;       /* periods between the sample's window and the read, 0..ROD_IMU_MAX_DELAY */
+    uint32_t imu_seed;       /* noise draws (xorshift32), the same on every machine */
+    double imu_fault_time;   /* from this run time on the IMU fails as imu_fault says [s] */
+    int32_t imu_fault;       /* ROD_IMU_FAULT_*: 0 none */
     int32_t reserved;
+    double imu_tilt;         /* the part's mounting tilt in the swing plane: its frame is the rod's turned by this [rad] */
 } rod_plant_config;
+
+#define ROD_IMU_MAX_DELAY 4
+enum { ROD_IMU_FAULT_NONE = 0, ROD_IMU_FAULT_SILENT = 1, ROD_IMU_FAULT_STUCK = 2, ROD_IMU_FAULT_RANGE = 3 };
 
 typedef struct rod_plant rod_plant;
 
@@ -187,6 +209,10 @@ double rod_plant_last_current(const rod_plant *p);
 void rod_plant_set_external_torque(rod_plant *p, double torque);
 
 int32_t rod_plant_encoder(const rod_plant *p);
+/* The IMU's sample a control step reads now (imu_on), for a caller that steps the plant itself one period at a
+ * time (the runner does this on its own): out = gyro, accel x, accel y. Returns 1 (a sample), 0 (none came:
+ * the pipeline, or a "silent" fault) or -1 (no IMU). */
+int rod_plant_imu_read(rod_plant *p, double period, float out[3]);
 /* The count for a given angle (same formula, for tests). */
 int32_t rod_plant_encoder_count(const rod_plant *p, double theta1);
 
@@ -201,6 +227,8 @@ typedef void (*rod_sil_arm_fn)(int mode);
 typedef float (*rod_sil_step_fn)(int32_t encoder_count);
 typedef int (*rod_sil_status_fn)(float *est, int cap);
 typedef float (*rod_sil_duty_fn)(void);
+/* The IMU's sample for the coming step: gyro z [rad/s], accelerometer x, y [m/s^2], fresh (0: none came) */
+typedef void (*rod_sil_imu_fn)(float gyro, float accel_x, float accel_y, int fresh);
 
 typedef struct {
     rod_sil_reset_fn reset;
@@ -208,6 +236,7 @@ typedef struct {
     rod_sil_step_fn step;
     rod_sil_status_fn status;
     rod_sil_duty_fn duty; /* may be NULL in torque mode */
+    rod_sil_imu_fn imu;   /* may be NULL: a controller without the IMU (then it is not called) */
 } rod_sil_api;
 
 #define ROD_RUN_MAX_EST 256
@@ -247,6 +276,7 @@ typedef struct {
     int32_t *mode;
     int32_t *count;
     double *motor;
+    float *imu;  /* imu[3k..3k+2]: the IMU sample given to step k (gyro, accel x, accel y); NaN when none */
 } rod_run_log;
 
 typedef struct {

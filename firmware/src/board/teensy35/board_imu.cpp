@@ -1,0 +1,132 @@
+// board_imu.cpp -- ICM-42688-P over SPI0 with an asynchronous (DMA) transfer; see board_imu.h.
+//
+// Registers (ICM-42688-P datasheet DS-000347, bank 0): DEVICE_CONFIG 0x11 (bit 0 soft reset),
+// ACCEL_DATA_X1 0x1F .. GYRO_DATA_Z0 0x2A (big-endian int16, accel then gyro), PWR_MGMT0 0x4E,
+// GYRO_CONFIG0 0x4F, ACCEL_CONFIG0 0x50, WHO_AM_I 0x75 = 0x47; bit 7 of the address reads.
+// SPI API: PaulStoffregen/SPI (SPIClass::transfer(tx, rx, count, EventResponderRef) under
+// SPI_HAS_TRANSFER_ASYNC) and cores/teensy3/EventResponder.h (attachImmediate).
+#include "board_imu.h"
+
+#include "board_framework.h"
+#include "board_pins.h"
+#include "rod_config.h"
+
+#if ROD_NY > 1
+
+static const uint8_t REG_DEVICE_CONFIG = 0x11, REG_ACCEL_X1 = 0x1F, REG_PWR_MGMT0 = 0x4E;
+static const uint8_t REG_GYRO_CONFIG0 = 0x4F, REG_ACCEL_CONFIG0 = 0x50, REG_WHO_AM_I = 0x75, WHO_AM_I = 0x47;
+static const uint8_t READ = 0x80;
+static const uint8_t GYRO_2000DPS_1KHZ = 0x06;   // FS_SEL 000, ODR 0110
+static const uint8_t ACCEL_16G_1KHZ = 0x06;      // FS_SEL 000, ODR 0110
+static const uint8_t GYRO_ACCEL_LOW_NOISE = 0x0F;
+static const float GYRO_RAD_S_PER_LSB = 3.14159265f / 180.0f / 16.4f;  // +-2000 dps: 16.4 LSB/dps
+static const float ACCEL_M_S2_PER_LSB = 9.80665f / 2048.0f;           // +-16 g: 2048 LSB/g
+static const size_t FRAME = 13;  // address, then 6 accel and 6 gyro bytes
+
+static const SPISettings settings(BOARD_IMU_SPI_HZ, MSBFIRST, SPI_MODE0);
+static EventResponder done_event;
+static uint8_t tx[FRAME] = {REG_ACCEL_X1 | READ};
+static uint8_t rx[FRAME];
+static volatile bool done, busy;
+static bool alive;
+
+static void write_reg(uint8_t reg, uint8_t value)
+{
+    SPI.beginTransaction(settings);
+    digitalWriteFast(BOARD_PIN_IMU_CS, LOW);
+    SPI.transfer(reg);
+    SPI.transfer(value);
+    digitalWriteFast(BOARD_PIN_IMU_CS, HIGH);
+    SPI.endTransaction();
+}
+
+static uint8_t read_reg(uint8_t reg)
+{
+    SPI.beginTransaction(settings);
+    digitalWriteFast(BOARD_PIN_IMU_CS, LOW);
+    SPI.transfer((uint8_t)(reg | READ));
+    uint8_t v = SPI.transfer(0);
+    digitalWriteFast(BOARD_PIN_IMU_CS, HIGH);
+    SPI.endTransaction();
+    return v;
+}
+
+static void transfer_done(EventResponderRef)
+{
+    digitalWriteFast(BOARD_PIN_IMU_CS, HIGH);
+    SPI.endTransaction();
+    busy = false;
+    done = true;
+}
+
+static int16_t be16(const uint8_t *p)
+{
+    return (int16_t)(((uint16_t)p[0] << 8) | p[1]);
+}
+
+bool board_imu_begin(void)
+{
+    pinMode(BOARD_PIN_IMU_CS, OUTPUT);
+    digitalWriteFast(BOARD_PIN_IMU_CS, HIGH);
+    SPI.setSCK(BOARD_PIN_IMU_SCK);  // pin 13 is the LED
+    SPI.begin();
+    write_reg(REG_DEVICE_CONFIG, 0x01);
+    delay(2);  // the soft reset takes 1 ms
+    if (read_reg(REG_WHO_AM_I) != WHO_AM_I) {
+        return false;
+    }
+    write_reg(REG_GYRO_CONFIG0, GYRO_2000DPS_1KHZ);
+    write_reg(REG_ACCEL_CONFIG0, ACCEL_16G_1KHZ);
+    write_reg(REG_PWR_MGMT0, GYRO_ACCEL_LOW_NOISE);
+    delay(50);  // the gyro starts within 30 ms of PWR_MGMT0
+    done_event.attachImmediate(transfer_done);
+    alive = true;
+    return true;
+}
+
+void board_imu_take(rod_imu_reading_t *out)
+{
+    out->fresh = false;
+    if (!done) {
+        return;
+    }
+    done = false;
+    // the part's axes to the rod's frame (board_pins.h): x along the rod to the tip, y toward +theta
+    const float a[3] = {be16(rx + 1) * ACCEL_M_S2_PER_LSB, be16(rx + 3) * ACCEL_M_S2_PER_LSB, be16(rx + 5) * ACCEL_M_S2_PER_LSB};
+    const float g[3] = {be16(rx + 7) * GYRO_RAD_S_PER_LSB, be16(rx + 9) * GYRO_RAD_S_PER_LSB, be16(rx + 11) * GYRO_RAD_S_PER_LSB};
+    out->accel_x = BOARD_IMU_X_SIGN * a[BOARD_IMU_X_AXIS];
+    out->accel_y = BOARD_IMU_Y_SIGN * a[BOARD_IMU_Y_AXIS];
+    out->gyro = BOARD_IMU_Z_SIGN * g[BOARD_IMU_Z_AXIS];
+    out->fresh = true;
+}
+
+void board_imu_start(void)
+{
+    if (!alive || busy) {
+        return;  // a transfer still under way: this period's sample is skipped, the core sees none
+    }
+    busy = true;
+    SPI.beginTransaction(settings);
+    digitalWriteFast(BOARD_PIN_IMU_CS, LOW);
+    if (!SPI.transfer(tx, rx, FRAME, done_event)) {
+        digitalWriteFast(BOARD_PIN_IMU_CS, HIGH);
+        SPI.endTransaction();
+        busy = false;
+    }
+}
+
+#else  // a firmware designed without the IMU never touches its pins
+
+bool board_imu_begin(void)
+{
+    return false;
+}
+
+void board_imu_take(rod_imu_reading_t *out)
+{
+    out->fresh = false;
+}
+
+void board_imu_start(void) {}
+
+#endif

@@ -1,0 +1,239 @@
+"""The optional tip IMU (sensors.tip_imu): its parameters, its place in the rod model and the design, the
+simulated part, the firmware's IMU path run in the SIL against the faithful plant, the lost-IMU FAULT, the log's
+IMU columns and `rodctl identify --imu`."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from host_tools import run_rodctl
+from rodgains.design import design
+from rodgains.imu import ImuSite, measurement, observability
+from rodgains.linearize import linearize_upright, numerical_jacobian
+from rodgains.params import load_params
+from rodgains.rod_model import RodModel
+from rodctl import paths
+from rodctl.link import protocol as P
+from rodctl.sim import convergence
+from rodctl.sim.imu import ImuConfig, linear_rows
+from rodctl.sim.plant import Plant, faithful_plant, run_closed_loop
+
+IMU = ["sensors.tip_imu=true"]
+G = 9.81
+
+
+@pytest.fixture(scope="module")
+def imu_params():
+    return load_params(overrides=IMU)
+
+
+@pytest.fixture(scope="module")
+def imu_design(imu_params):
+    return design(imu_params)
+
+
+@pytest.fixture(scope="module")
+def imu_sil(imu_params):
+    from rodctl.build.sil_build import build_sil
+
+    return build_sil(imu_params)
+
+
+# ---- parameters -----------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("override,key", [
+    ("sensors.gyro_noise_density=0", "sensors.gyro_noise_density"),
+    ("sensors.accel_noise_density=-1e-4", "sensors.accel_noise_density"),
+    ("sensors.imu_from_tip=0.2", "sensors.imu_from_tip"),
+])
+def test_bad_imu_values_are_one_line_naming_the_key(override, key, tmp_path):
+    r = run_rodctl("gains", "--set", "sensors.tip_imu=true", "--set", override, "--header", str(tmp_path / "h.h"))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and key in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "h.h").exists()
+
+
+def test_an_imu_the_model_order_puts_on_the_clamped_first_edge_is_refused(tmp_path):
+    r = run_rodctl("gains", "--set", "sensors.tip_imu=true", "--set", "rod.edges=2", "--set", "sensors.imu_from_tip=0.1",
+                   "--header", str(tmp_path / "h.h"))
+    assert r.returncode == 2 and "sensors.imu_from_tip" in r.stderr and "edge 1" in r.stderr
+
+
+def test_base_only_stays_the_default_and_its_header_has_no_imu():
+    assert load_params()["sensors"]["tip_imu"] is False
+    text = paths.COMMITTED_HEADER.read_text()
+    assert "#define ROD_NY" in text and " 1  /*" in text.split("#define ROD_NY", 1)[1].split("\n")[0]
+    assert "ROD_IMU_L_INIT" not in text
+
+
+# ---- model and design -------------------------------------------------------------------------------
+
+def test_the_rod_model_carries_the_imu_mass_at_its_place(imu_params):
+    bare, rod = RodModel.from_params(load_params()), RodModel.from_params(imu_params)
+    assert rod.m * (rod.mass_below[0] - bare.mass_below[0]) == pytest.approx(0.002)
+    site = ImuSite.on_model(imu_params)
+    assert site.edge == rod.N - 1 and site.position == pytest.approx(0.150)
+    A, B = linearize_upright(rod)
+    An, Bn = numerical_jacobian(rod)
+    assert np.abs(A - An).max() < 1e-6 * np.abs(A).max() and np.abs(B - Bn).max() < 1e-6 * np.abs(B).max()
+
+
+def test_the_design_measurement_model_is_the_plant_s_own_on_the_same_rod(imu_params):
+    """y = C z + D u of the design equals the rows linearized from the C plant's IMU site and masses."""
+    p = imu_params.with_overrides('gearbox.model="rigid"')
+    rod = RodModel.from_params(p)
+    A, B = linearize_upright(rod)
+    C, D = measurement(A, B, rod.l, rod.g, ImuSite.on_model(p))
+    pl = Plant(p, kind="inextensible", edges=rod.N, imu=ImuConfig.from_params(p))
+    Ap, Bp = convergence.linearization(pl, upright=True)
+    Cp, Dp = linear_rows(pl, convergence.hanging_equilibrium(pl, True), Ap, Bp, pl.config.imu.position, pl.config.g)
+    assert np.abs(Ap - A).max() < 1e-7 * np.abs(A).max()
+    assert np.abs(Cp - C).max() < 1e-5 * np.abs(C).max()
+    assert C[1, rod.N - 1] < -G * 0.9  # the accelerometer's y sees the tip's lean from gravity, -g per rad
+
+
+def test_the_imu_makes_every_mode_more_visible(imu_params, imu_design):
+    rows = observability(imu_params, imu_design.A, imu_design.B, imu_design.rod.l, imu_design.rod.g)
+    assert len(rows) >= imu_design.N
+    assert all(r["seen_with_imu"] >= r["seen_encoder"] for r in rows)
+    assert min(r["seen_with_imu"] / r["seen_encoder"] for r in rows) > 10  # each mode at least 10 x better seen
+
+
+def test_with_the_imu_every_matrix_case_short_of_buckling_is_linearly_stable_without_dry_friction(imu_design):
+    from rodctl.sim.linear_check import corner_radii
+
+    rows = corner_radii(imu_design)
+    unstable = [(name, rho, ratio) for name, rho, ratio in rows if rho > 1.0]
+    assert all(ratio >= 1.0 for _, _, ratio in unstable), unstable  # only what buckles clamped may fall
+    assert {n: r for n, r, _ in rows}["E-15"] < 1.0 and {n: r for n, r, _ in rows}["rho+15"] < 1.0
+
+
+def test_the_header_carries_the_imu_tables_and_compiles_for_the_m4f(imu_design, tmp_path):
+    from rodgains.codegen import header_text
+
+    h = tmp_path / "rod_gains.h"
+    h.write_text(header_text(imu_design, "test"))
+    text = h.read_text()
+    assert "#define ROD_NY" in text and "ROD_IMU_L_INIT" in text and f"#define ROD_IMU_NA {imu_design.imu.NA}" in text
+    for src in sorted(paths.CORE_SRC.glob("*.c")):
+        r = subprocess.run(["arm-none-eabi-gcc", "-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard",
+                            "-O2", "-std=c11", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror", f"-I{tmp_path}",
+                            f"-I{paths.CORE_SRC}", "-c", str(src), "-o", str(tmp_path / "x.o")],
+                           capture_output=True, text=True)
+        assert r.returncode == 0, (src.name, r.stderr)
+    board = paths.FIRMWARE / "src" / "board" / "teensy35"
+    stub = Path(__file__).parent / "c" / "teensy_stub"
+    r = subprocess.run(["arm-none-eabi-g++", "-std=gnu++14", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror",
+                        "-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-O2", "-fno-exceptions",
+                        "-fno-rtti", f"-I{stub}", f"-I{tmp_path}", f"-I{paths.CORE_SRC}", "-c",
+                        str(board / "board_imu.cpp"), "-o", str(tmp_path / "b.o")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+
+
+# ---- the simulated part ---------------------------------------------------------------------------
+
+def _hanging_at_rest(pl):
+    """The DER stretched by its own weight (its stretching modes carry no damping: from straight it rings)."""
+    y0 = convergence.hanging_equilibrium(pl, False)
+    pl.set_raw_state(y0[:pl.n], y0[pl.n:])
+    return pl
+
+
+def test_hanging_still_the_part_reads_gravity_along_the_rod_and_its_bias(imu_params):
+    pl = _hanging_at_rest(faithful_plant(imu_params))
+    dt = imu_params.dt
+    samples = []
+    for _ in range(400):
+        pl.advance(0.0, dt)
+        s = pl.imu_read(dt)
+        if s is not None:
+            samples.append(s)
+    g, ax, ay = np.array(samples[50:]).T
+    assert np.mean(ax) == pytest.approx(-G, abs=0.05) and abs(np.mean(ay)) < 0.02
+    assert np.mean(g) == pytest.approx(imu_params["sensors"]["gyro_bias"], abs=3e-4)
+    assert np.std(g) == pytest.approx(4.9e-5 * math.sqrt(500), rel=0.2)  # the datasheet's density over 500 Hz
+    lsb = imu_params["sensors"]["gyro_range"] / 32768
+    assert np.allclose(np.round(g / lsb) * lsb, g, atol=1e-6)  # one LSB steps
+
+
+def test_a_tilted_part_reads_gravity_turned_by_its_tilt(imu_params):
+    pl = _hanging_at_rest(faithful_plant(imu_params, imu=ImuConfig.from_params(imu_params, tilt=math.radians(3.0))))
+    dt = imu_params.dt
+    s = [pl.imu_read(dt) for _ in range(300) if not pl.advance(0.0, dt)]
+    _, ax, ay = np.array([x for x in s if x is not None][50:]).T
+    assert math.degrees(math.atan2(np.mean(ay), -np.mean(ax))) == pytest.approx(3.0, abs=0.1)
+
+
+# ---- the firmware's IMU path in the SIL -----------------------------------------------------------
+
+def _balance(params, sil, seconds, **imu_changes):
+    pl = faithful_plant(params, imu=ImuConfig.from_params(params, **imu_changes))
+    pl.set_state(np.full(pl.N, math.pi - math.radians(10.0)))
+    return run_closed_loop(pl, sil, int(seconds / params.dt), arm_mode=1)
+
+
+@pytest.mark.parametrize("fault", ["silent", "stuck", "range"])
+def test_losing_the_imu_while_balancing_trips_fault_imu_within_20_ms(fault, imu_params, imu_sil):
+    log = _balance(imu_params, imu_sil, 2.0, fault=fault, fault_time=1.0)
+    faulted = np.nonzero(log["mode"] == P.Mode.FAULT)[0]
+    assert (log["mode"][log["time"] < 1.0] == P.Mode.BALANCE).all()
+    assert len(faulted) and log["time"][faulted[0]] - 1.0 <= 0.020
+    from rodctl.sim.plant import SilController
+
+    assert SilController(imu_sil).lib.rod_sil_reason() == P.Reason.IMU
+
+
+def test_with_the_imu_the_estimate_tracks_the_rod_to_a_degree_where_base_only_cannot(imu_params, imu_sil):
+    """Balance from 10 deg on the faithful plant (1 deg of gearbox play): the estimate's error per edge."""
+    from rodctl.build.sil_build import build_sil
+    from rodctl.sim.scenarios import resample_edges
+
+    def est_error_deg(params, sil):
+        pl = faithful_plant(params)
+        pl.set_state(np.full(pl.N, math.pi - math.radians(10.0)))
+        log = run_closed_loop(pl, sil, 4000, arm_mode=1)
+        n = log["controller_edges"]
+        use = (log["mode"] == P.Mode.BALANCE) & (log["time"] > 1.0)
+        err = log["est"][use, :n] - resample_edges(log["theta"][use], n, pl.node_arc())
+        return float(np.degrees(np.sqrt(np.mean(err**2))))
+
+    with_imu = est_error_deg(imu_params, imu_sil)
+    base = load_params()
+    base_only = est_error_deg(base, build_sil(base))
+    assert with_imu < 1.0 and with_imu < 0.5 * base_only
+
+
+# ---- logs and identify ----------------------------------------------------------------------------
+
+def test_a_log_of_an_imu_board_carries_the_imu_columns(tmp_path):
+    import pyarrow.parquet as pq
+
+    params = tmp_path / "imu.toml"
+    params.write_text(load_params(overrides=IMU).to_toml())
+    out = tmp_path / "imu.parquet"
+    r = run_rodctl("log", "--port", f"sim://?params={params}", "--duration", "1.5", "--out", str(out), timeout=300)
+    assert r.returncode == 0, r.stderr
+    t = pq.read_table(out).to_pandas()
+    fresh = t[t["imu_status_bits"] >= 0]
+    assert len(fresh) > 0.9 * len(t)
+    assert fresh["imu_accel_x_m_s2"].mean() == pytest.approx(-G, abs=0.1)
+    assert ((fresh["imu_status_bits"].to_numpy() & int(P.ImuFlag.FRESH)) != 0).all()
+
+
+def test_identify_imu_measures_a_mounting_tilt_and_the_gyro_s_sense(tmp_path):
+    params = tmp_path / "imu.toml"
+    params.write_text(load_params(overrides=IMU).to_toml())
+    r = run_rodctl("identify", "--imu", "--port", f"sim://?params={params}&imu_tilt_deg=2", timeout=300)
+    assert r.returncode == 0, r.stderr
+    tilt = float(r.stdout.split("mounting tilt ")[1].split(" deg")[0])
+    assert tilt == pytest.approx(2.0, abs=0.1)
+    assert "the same sense" in r.stdout and r.stdout.strip().endswith("IMU: PASS")
+
+
+def test_identify_imu_on_a_board_without_one_is_one_line(tmp_path):
+    r = run_rodctl("identify", "--imu", "--yes", "--port", "sim://", timeout=300)
+    assert r.returncode == 2 and "sensors.tip_imu" in r.stderr and "Traceback" not in r.stderr
