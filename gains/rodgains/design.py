@@ -15,6 +15,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.linalg as sla
 
+from . import imu as imu_model
 from . import sampled
 from .errors import DesignRefused
 from .imu import ImuEstimator, ImuSite
@@ -119,14 +120,15 @@ class Design:
         return self.observer_matrices()
 
     def imu_loop(self, actuator_gain: complex = 1.0, Ad=None, Bd=None, delay: int = 0, C_imu=None,
-                 D_imu=None) -> np.ndarray:
-        """The sampled loop with the tip IMU: plant (Ad, Bd; default the design model) read by the encoder and
-        the IMU (C_imu, D_imu: the plant's IMU rows, default the design's) with the whole estimator."""
+                 D_imu=None, C_enc=None) -> np.ndarray:
+        """The sampled loop with the tip IMU: plant (Ad, Bd; default the design model) read by the encoder
+        (C_enc: its row, default theta_1) and the IMU (C_imu, D_imu: the plant's IMU rows, default the design's)
+        with the whole estimator."""
         im = self.imu
         Ao, Bo, Co, Do = im.full(self.Ad, self.Bd, self.w_decay)
         Lo = np.vstack([im.L, im.Lw[None, :], im.La])
         Ko = np.hstack([self.K, [[1.0]], np.zeros((1, im.NA))])
-        Ap, Bp, Cp, Dp = im.plant(self.Ad if Ad is None else Ad, self.Bd if Bd is None else Bd, C_imu, D_imu)
+        Ap, Bp, Cp, Dp = im.plant(self.Ad if Ad is None else Ad, self.Bd if Bd is None else Bd, C_imu, D_imu, C_enc)
         return imu_closed_loop(Ap, Bp, Cp, Dp, Ao, Bo, Co, Do, Ko, Lo, actuator_gain, delay)
 
     def loop(self, actuator_gain: complex = 1.0, Ad=None, Bd=None, delay: int = 0) -> np.ndarray:
@@ -192,8 +194,6 @@ class Design:
 def imu_estimator(p: Params, rod: RodModel, A, B, Ad, Bd, Wd, V_enc, w_decay: float) -> ImuEstimator:
     """The sampled Kalman filter over the design state, the disturbance w, the encoder's offset, the gyro's
     bias and the IMU's readings in flight (ImuEstimator), from the encoder and the tip IMU."""
-    from . import imu as imu_model
-
     dt, n = p.dt, A.shape[0]
     site = ImuSite.on_model(p, rod.N)
     C_imu, D_imu = imu_model.measurement(A, B, rod.l, rod.g, site)

@@ -70,14 +70,24 @@ def measurement(A: np.ndarray, B: np.ndarray, l: float, g: float, site: ImuSite)
     return C, D
 
 
-def noise(p: Params) -> tuple[float, float]:
-    """Per-sample standard deviations (gyro [rad/s], accelerometer [m/s^2]) at the part's data rate: the
-    white noise of its density over half the rate (one-sided), and one LSB's rounding."""
+def white_noise(p: Params) -> tuple[float, float]:
+    """Per-sample standard deviations of the part's white noise (gyro [rad/s], accelerometer [m/s^2]) at its
+    data rate: the noise density over half the rate (one-sided)."""
     s = p["sensors"]
     half_band = 0.5 * s["rate_hz"]
-    lsb_g, lsb_a = s["gyro_range"] / 32768.0, s["accel_range"] / 32768.0
-    return (float(np.hypot(s["gyro_noise_density"] * np.sqrt(half_band), lsb_g / np.sqrt(12))),
-            float(np.hypot(s["accel_noise_density"] * np.sqrt(half_band), lsb_a / np.sqrt(12))))
+    return (float(s["gyro_noise_density"] * np.sqrt(half_band)), float(s["accel_noise_density"] * np.sqrt(half_band)))
+
+
+def lsb(p: Params) -> tuple[float, float]:
+    """One count of the 16-bit readings at full scale (gyro [rad/s], accelerometer [m/s^2])."""
+    s = p["sensors"]
+    return s["gyro_range"] / 32768.0, s["accel_range"] / 32768.0
+
+
+def noise(p: Params) -> tuple[float, float]:
+    """Per-sample standard deviations (gyro [rad/s], accelerometer [m/s^2]) the estimator assumes: the white
+    noise and one LSB's rounding."""
+    return tuple(float(np.hypot(w, q / np.sqrt(12))) for w, q in zip(white_noise(p), lsb(p)))
 
 
 def delay_periods(p: Params) -> int:
@@ -141,8 +151,7 @@ class ImuEstimator:
         else:
             AZ[2:4] = C_imu
             BA[2:4] = D_imu[:, 0]
-            for i in range(1, delay):  # s_{i+1} <- s_i
-                AA[2 + 2 * i:4 + 2 * i, 2 * i:2 + 2 * i] = np.eye(2)
+            AA[2:, 2:] = in_flight_shift(delay)
             CA[1, NA - 2] = 1.0
             CA[2, NA - 1] = 1.0
         return cls(delay, C_imu, D_imu, AZ, AA, BA, CZ, CA, DY, V)
@@ -163,13 +172,16 @@ class ImuEstimator:
         D = self.DY[:, None]
         return A, B, C, D
 
-    def plant(self, Ad: np.ndarray, Bd: np.ndarray, C_imu=None, D_imu=None):
+    def plant(self, Ad: np.ndarray, Bd: np.ndarray, C_imu=None, D_imu=None, C_enc=None):
         """(A, B, C, D) of a plant (Ad, Bd) read by this IMU arrangement: state [x, s_1..s_d] (no offset, no
-        bias: those have nothing to be stabilized), y = C x + D u. C_imu, D_imu: the IMU rows of that plant
-        (default: the design model's)."""
+        bias: those have nothing to be stabilized), y = C x + D u. C_imu, D_imu: the IMU rows of that plant,
+        C_enc its encoder's row (default: the design model's: the IMU's rows, and theta_1)."""
         C_imu = self.C_imu if C_imu is None else C_imu
         D_imu = self.D_imu if D_imu is None else D_imu
         nx, d = Ad.shape[0], self.delay
+        if C_enc is None:
+            C_enc = np.zeros(nx)
+            C_enc[0] = 1.0
         n = nx + 2 * d
         A = np.zeros((n, n))
         A[:nx, :nx] = Ad
@@ -177,22 +189,22 @@ class ImuEstimator:
         B[:nx] = Bd
         C = np.zeros((3, n))
         D = np.zeros((3, 1))
-        C[0, :nx] = self._encoder_row(nx)
+        C[0, :nx] = np.ravel(C_enc)
         if d == 0:
             C[1:, :nx] = C_imu
             D[1:] = D_imu
         else:
             A[nx:nx + 2, :nx] = C_imu
             B[nx:nx + 2] = D_imu
-            for i in range(1, d):
-                A[nx + 2 * i:nx + 2 * i + 2, nx + 2 * i - 2:nx + 2 * i] = np.eye(2)
+            A[nx:, nx:] = in_flight_shift(d)
             C[1:, n - 2:] = np.eye(2)
         return A, B, C, D
 
-    def _encoder_row(self, nx: int) -> np.ndarray:
-        row = np.zeros(nx)
-        row[0] = 1.0
-        return row
+
+def in_flight_shift(delay: int) -> np.ndarray:
+    """(2 delay, 2 delay): one period of the readings in flight, s_{i+1} <- s_i (the newest s_1 comes in from
+    the state, the oldest s_delay is what the step reads)."""
+    return np.eye(2 * delay, k=-2)
 
 
 def closed_loop(Ap, Bp, Cp, Dp, Ao, Bo, Co, Do, Ko, Lo, actuator_gain: complex = 1.0, delay: int = 0) -> np.ndarray:

@@ -154,8 +154,8 @@ static void queue_imu(rod_device_t *dev, uint32_t now_us)
     m->gyro = c->imu_reading.gyro;
     m->accel_x = c->imu_reading.accel_x;
     m->accel_y = c->imu_reading.accel_y;
-    m->gyro_bias = balancing ? c->obs.a[1] : c->imu.gyro_bias;
-    m->encoder_offset = balancing ? c->obs.a[0] : 0.0f;
+    m->gyro_bias = balancing ? c->obs.a[ROD_OBS_GYRO_BIAS] : c->imu.gyro_bias;
+    m->encoder_offset = balancing ? c->obs.a[ROD_OBS_ENCODER_OFFSET] : 0.0f;
     m->status = (uint8_t)((c->imu_reading.fresh ? ROD_IMU_FLAG_FRESH : 0u) | (c->imu_good ? ROD_IMU_FLAG_GOOD : 0u)
                           | (c->imu.bias_known ? ROD_IMU_FLAG_BIAS_KNOWN : 0u));
     m->bad_run = (uint16_t)(c->imu.bad_run > 0xFFFFu ? 0xFFFFu : c->imu.bad_run);

@@ -46,8 +46,8 @@ void rod_observer_init(rod_observer_t *o, float y, float rate, float gyro_bias)
         }
         o->a[i] = s;
     }
-    o->a[0] = 0.0f;
-    o->a[1] = gyro_bias;
+    o->a[ROD_OBS_ENCODER_OFFSET] = 0.0f;
+    o->a[ROD_OBS_GYRO_BIAS] = gyro_bias;
 #else
     (void)gyro_bias;
 #endif

@@ -26,6 +26,10 @@
 extern "C" {
 #endif
 
+/* Where the IMU's extra states sit in rod_observer_t.a (gains/rodgains/imu.py, ImuEstimator). */
+#define ROD_OBS_ENCODER_OFFSET 0 /* [rad] */
+#define ROD_OBS_GYRO_BIAS 1      /* [rad/s] */
+
 typedef struct {
     float z[ROD_NX]; /* estimate z[k|k]: angles then rates, relative to upright */
 #if ROD_NY > 1

@@ -151,8 +151,7 @@ class LogWriter:
                    _name(_REASON_NAMES, reason), int(msg.flags), int(msg.encoder_count), float(msg.base_rate),
                    float(msg.torque), float(msg.duty), int(msg.step_us), int(msg.overruns),
                    int(msg.frames_dropped), int(msg.rx_errors)) + th + rt
-            if self._held is not None:
-                self._buf.append(self._held)
+            self._release_held()
             self._held = row + schema.NO_IMU
             self.rows += 1
             if (mode, reason) != self._last_mode:
@@ -162,6 +161,12 @@ class LogWriter:
                                                                       if reason else ""))
                 self._last_mode = (mode, reason)
             self._added()
+
+    def _release_held(self) -> None:
+        """The held row goes out as it is, its IMU columns empty (lock held)."""
+        if self._held is not None:
+            self._buf.append(self._held)
+            self._held = None
 
     def _event_locked(self, t, host_time_s, seq, kind, mode, reason, info) -> None:
         self._ebuf.append((t, float(host_time_s), int(seq), kind, int(mode), _name(_MODE_NAMES, mode),
@@ -245,9 +250,7 @@ class LogWriter:
         """Write everything received so far (the latest row too, without waiting for its IMU frame)."""
         with self._lock:
             if not self.closed:
-                if self._held is not None:
-                    self._buf.append(self._held)
-                    self._held = None
+                self._release_held()
                 self._flush_locked()
 
     def maybe_flush(self) -> None:
@@ -262,9 +265,7 @@ class LogWriter:
         with self._lock:
             if self.closed:
                 return self.path
-            if self._held is not None:
-                self._buf.append(self._held)
-                self._held = None
+            self._release_held()
             self._flush_locked()
             tr = {"closed_utc": utc_now(), "rows": str(self.rows), "events": str(self.events),
                   "heartbeat_acks": str(self.heartbeat_acks)}

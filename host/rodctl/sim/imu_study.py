@@ -38,7 +38,7 @@ def run(design_p, plant_p, task: str) -> dict[str, float]:
     w = t > t[-1] - WINDOW_S
     bal = w & (log["mode"] == matrix.MODE_BALANCE)
     n = log["controller_edges"]
-    out = {"mean_deg": float(dev[w].mean()), "peak_deg": float(dev[w].max()), "fault": bool((log["mode"] == 3).any())}
+    out = {"mean_deg": float(dev[w].mean()), "peak_deg": float(dev[w].max()), "fault": bool((log["mode"] == matrix.MODE_FAULT).any())}
     if bal.any():
         err = log["est"][bal, :n] - resample_edges(log["theta"][bal], n, log["plant_bounds"])
         err = np.mod(err + np.pi, 2 * np.pi) - np.pi

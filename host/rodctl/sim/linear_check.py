@@ -17,7 +17,6 @@ import numpy as np
 from rodgains import sampled
 from rodgains.buckling import clamped_ratio
 from rodgains.design import Design
-from rodgains.imu import closed_loop as imu_closed_loop
 from rodgains.trim import trim_gains
 
 from rodctl.sim import convergence, matrix
@@ -74,26 +73,12 @@ def loop_radius(d: Design, plant_p, delay_periods: int = 0, actuator_gain: float
     if d.imu is not None:
         A, B, C, Ci, Di = linear_plant(plant_p, imu=True)
         Ad, Bd = sampled.zoh(A, B, d.dt)
-        E = np.zeros((1, Ad.shape[0]))
-        E[0] = C[0]
-        return _radius(_imu_loop(d, Ad, Bd, E, Ci, Di, actuator_gain, delay_periods))
+        return _radius(d.imu_loop(actuator_gain, Ad, Bd, delay_periods, C_imu=Ci, D_imu=Di, C_enc=C))
     A, B, C = linear_plant(plant_p)
     Ad, Bd = sampled.zoh(A, B, d.dt)
     Ao, Bo, Co, Ko, Lo = d.estimator()
     return _radius(sampled.closed_loop(Ad, Bd, C, Ko, Lo, Ad_obs=Ao, Bd_obs=Bo, actuator_gain=actuator_gain, C_obs=Co,
                                        delay=delay_periods))
-
-
-def _imu_loop(d: Design, Ad, Bd, C_enc, C_imu, D_imu, actuator_gain, delay):
-    """The loop with the tip IMU on a plant (Ad, Bd) whose encoder row is C_enc, IMU rows C_imu, D_imu. The
-    IMU reads one sample old like the design's (ImuEstimator.plant), the D term included."""
-    im = d.imu
-    Ao, Bo, Co, Do = im.full(d.Ad, d.Bd, d.w_decay)
-    Lo = np.vstack([im.L, im.Lw[None, :], im.La])
-    Ko = np.hstack([d.K, [[1.0]], np.zeros((1, im.NA))])
-    Ap, Bp, Cp, Dp = im.plant(Ad, Bd, C_imu, D_imu)
-    Cp[0, :Ad.shape[0]] = C_enc[0]
-    return imu_closed_loop(Ap, Bp, Cp, Dp, Ao, Bo, Co, Do, Ko, Lo, actuator_gain, delay)
 
 
 def corner_radii(d: Design) -> list[tuple[str, float, float]]:
