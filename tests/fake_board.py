@@ -71,7 +71,7 @@ class FakeBoard:
     def _hello(self):
         return P.Hello(fw_major=0, fw_minor=1, fw_patch=0, gains_schema=1, n=2, mode=self.mode, reason=0, rig=0,
                        period_us=1000, decimation=10, swing_amplitude=0.05, swing_angle=0.5, catch_angle=0.5,
-                       heartbeat_timeout=0.5, torque_max=0.2, header_sha256=bytes(32))
+                       heartbeat_timeout=0.5, torque_max=0.2, header_sha256=bytes(32), counts_num=4896, counts_den=5)
 
     def _rx(self) -> None:
         dec = P.Decoder()

@@ -1,9 +1,9 @@
-"""Write tests/vectors/rodlink_vectors.json: exact rodlink v1 wire bytes both codecs must produce.
+"""Write tests/vectors/rodlink_vectors.json: exact rodlink v2 wire bytes both codecs must produce.
 
     python3 tests/make_vectors.py            # rewrite the JSON (then review the diff and commit it)
     python3 tests/make_vectors.py --check    # exit 1 if the committed JSON differs
 
-The wire bytes here come from an independent reference encoder written straight from the v1 wire
+The wire bytes here come from an independent reference encoder written straight from the v2 wire
 specification (explicit struct formats, the textbook COBS loop, a bit-by-bit CRC), not from
 host/rodctl/link/protocol.py or the TOML. The script also checks that rodctl.link.protocol agrees before writing,
 so a mismatch between the TOML layout and the specification stops here. tests/test_protocol.py
@@ -22,7 +22,7 @@ from pathlib import Path
 
 OUT = Path(__file__).resolve().parent / "vectors" / "rodlink_vectors.json"
 
-# ---- reference implementation of the v1 wire specification ----------------------------------
+# ---- reference implementation of the v2 wire specification ----------------------------------
 
 
 def ref_crc16(data: bytes) -> int:
@@ -57,6 +57,7 @@ def ref_cobs(data: bytes) -> bytes:
     return bytes(out)
 
 
+VERSION = 2
 TYPES = {"TELEMETRY": 0x01, "HELLO": 0x02, "ACK": 0x03, "IMU": 0x04, "HEARTBEAT": 0x10, "ARM": 0x11, "DISARM": 0x12,
          "CLEAR_FAULT": 0x13, "SET": 0x14, "HELLO_REQUEST": 0x15, "IDENTIFY": 0x16,
          "SAVE_RIG": 0x17}
@@ -70,10 +71,10 @@ def ref_payload(name: str, f: dict) -> bytes:
                             f["frames_dropped"], f["rx_errors"])
                 + struct.pack(f"<{n}f", *f["theta_hat"]) + struct.pack(f"<{n}f", *f["rate_hat"]))
     if name == "HELLO":
-        return struct.pack("<BBBBBBBBIHHfffff32s", f["fw_major"], f["fw_minor"], f["fw_patch"], f["gains_schema"],
+        return struct.pack("<BBBBBBBBIHHfffff32sIHH", f["fw_major"], f["fw_minor"], f["fw_patch"], f["gains_schema"],
                            f["n"], f["mode"], f["reason"], f["rig"], f["period_us"], f["decimation"], 0,
                            f["swing_amplitude"], f["swing_angle"], f["catch_angle"], f["heartbeat_timeout"],
-                           f["torque_max"], bytes.fromhex(f["header_sha256"]))
+                           f["torque_max"], bytes.fromhex(f["header_sha256"]), f["counts_num"], f["counts_den"], 0)
     if name == "ACK":
         return struct.pack("<BBIBB", f["command"], f["result"], f["command_seq"], f["mode"], 0)
     if name == "IMU":
@@ -91,7 +92,7 @@ def ref_payload(name: str, f: dict) -> bytes:
 
 
 def ref_frame(name: str, seq: int, time_us: int, fields: dict) -> bytes:
-    body = struct.pack("<BBII", 1, TYPES[name], seq, time_us) + ref_payload(name, fields)
+    body = struct.pack("<BBII", VERSION, TYPES[name], seq, time_us) + ref_payload(name, fields)
     return ref_cobs(body + struct.pack("<H", ref_crc16(body))) + b"\0"
 
 
@@ -163,8 +164,9 @@ def cases() -> list[dict]:
         "fw_major": 1, "fw_minor": 2, "fw_patch": 3, "gains_schema": 1, "n": 5, "mode": 0, "reason": 0, "rig": 0x05,
         "period_us": 1000, "decimation": 10, "swing_amplitude": f32(0.01), "swing_angle": f32(0.5235988),
         "catch_angle": f32(0.5235988), "heartbeat_timeout": f32(0.5), "torque_max": f32(0.2),
-        "header_sha256": "bf696209351be89d53b64b5f4cabfdd2f0bb0dd5d367d8ae87a4c93c984f5843"},
-        "power-on hello; rig 0x05: encoder reversed, stored")
+        "header_sha256": "bf696209351be89d53b64b5f4cabfdd2f0bb0dd5d367d8ae87a4c93c984f5843",
+        "counts_num": 4896, "counts_den": 5},
+        "power-on hello; rig 0x05: encoder reversed, stored; 979.2 counts per turn")
     add("ack_ok", "ACK", 1001, 123457000, {"command": 0x11, "result": 0, "command_seq": 42, "mode": 4},
         "arm balance accepted, now CATCH")
     add("ack_bad_state", "ACK", 1002, 123458000, {"command": 0x11, "result": 2, "command_seq": 0xFFFFFFFF, "mode": 3},
@@ -185,7 +187,7 @@ def cases() -> list[dict]:
     add("save_rig", "SAVE_RIG", 61, 1000700, {}, "store the signs on the board")
     for param, value, label in [(1, 0.015, "swing_amplitude"), (2, 0.6, "swing_angle"), (3, 0.35, "catch_angle"),
                                 (4, 10.0, "telemetry_decimation"), (5, 0.25, "heartbeat_timeout"),
-                                (6, -1.0, "encoder_sign"), (7, -1.0, "motor_sign")]:
+                                (6, -1.0, "encoder_sign"), (7, -1.0, "motor_sign"), (8, 1958.4, "counts_per_rev")]:
         add(f"set_{label}", "SET", 48 + param, 1000500 + param, {"param": param, "value": f32(value)}, f"SET {label}")
     add("set_negative", "SET", 60, 0xFFFFFFFF, {"param": 1, "value": f32(-1e-3)}, "negative value (device says BAD_VALUE)")
     for exc, label, amp, dur, s1, s2, seed in [(1, "chirp", 0.02, 8.0, 0.5, 6.0, 0),
@@ -224,10 +226,10 @@ def document() -> dict:
             assert c["encoded"] == fixed[c["case"]], c
     assert ref_crc16(b"123456789") == 0x29B1
     return {
-        "description": "rodlink v1 test vectors: wire = COBS(header | payload | crc16-LE) + 0x00. "
+        "description": "rodlink v2 test vectors: wire = COBS(header | payload | crc16-LE) + 0x00. "
                        "Generated by tests/make_vectors.py from an independent reference encoder; "
                        "both codecs must produce exactly these bytes and decode them to these values.",
-        "protocol_version": 1,
+        "protocol_version": VERSION,
         "crc16": [{"data_ascii": "123456789", "crc": 0x29B1}, {"data_ascii": "", "crc": 0xFFFF},
                   {"data_hex": "00", "crc": ref_crc16(b"\0")}],
         "cobs": cobs,

@@ -21,7 +21,7 @@ def test_crc_of_rows_matches_the_scalar_crc():
 def test_batch_decode_equals_the_streaming_decoder_on_a_damaged_mixed_stream():
     rng = random.Random(5)
     blob = bytearray(telemetry_stream(3000, 5))
-    hello = P.Hello(0, 1, 0, 1, 5, P.Mode.DISARMED, P.Reason.NONE, 0, 1000, 1, 0.01, 0.5, 0.5, 0.5, 0.2, bytes(32))
+    hello = P.Hello(0, 1, 0, 1, 5, P.Mode.DISARMED, P.Reason.NONE, 0, 1000, 1, 0.01, 0.5, 0.5, 0.5, 0.2, bytes(32), 4896, 5)
     blob += P.encode_hello(hello, seq=9999) + P.encode_ack(P.MsgType.ARM, P.AckResult.OK, 1, P.Mode.CATCH, seq=10000)
     for _ in range(40):  # flipped bits and bytes anywhere (a flipped byte may also make a new delimiter)
         i = rng.randrange(len(blob))

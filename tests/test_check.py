@@ -33,7 +33,7 @@ def test_a_right_board_passes_every_step_and_writes_the_json(tmp_path):
     assert list(lines) == list(STEPS)
     assert all(ln.startswith("PASS") for ln in lines.values()), r.stdout
     assert "the design of gains/rodgains/default.toml" in lines["identity"]
-    assert "signs encoder +1 motor +1 (compiled defaults)" in lines["identity"]
+    assert "signs encoder +1 motor +1, 979.2 counts/turn (compiled defaults)" in lines["identity"]
     assert "0 overruns; telemetry 1000 of 1000 Hz, 0 frames dropped" in lines["loop"]
     assert "the turn read +2" in lines["encoder"]  # about +245 counts: a quarter turn of 979.2
     assert "tripped HEARTBEAT after 0.50" in lines["heartbeat"]
@@ -56,7 +56,9 @@ FAULTS = {
                                               "and A and B to pins 3 and 4 (docs/wiring.md)"),
     "counts_per_rev=1958.4": ("encoder", "still at rest, hanging 0 counts from zero; the turn read +4",
                               "Fix: the counts per output turn are not 979.2: check encoder.counts_per_motor_rev "
-                              "and motor.gear_ratio in gains/rodgains/default.toml (a gearmotor of another ratio?)"),
+                              "and motor.gear_ratio in gains/rodgains/default.toml (a gearmotor of another ratio?); "
+                              "for another encoder on this gearbox, `rodctl set counts_per_rev=N --save` keeps the "
+                              "rig's own on the board"),
     "nfault=low": ("driver", "nFAULT is low: the MAX14870 reports a fault and the board keeps the motor off",
                    "Fix: check the motor supply (VM, 4.5 to 36 V) and that the motor leads do not short, and "
                    "nFAULT's wire to pin 8 (docs/wiring.md)"),
@@ -66,8 +68,8 @@ FAULTS = {
     "boot_angle_deg=10": ("encoder", "the hanging rod reads -27 counts (-9.9 deg) from zero",
                           "Fix: the board takes its zero at power-on: let the rod hang still, then reset the board "
                           "(its button, or unplug and replug USB)"),
-    "header=stale": ("identity", "firmware 0.1.0, protocol v1, N=8 at 1000 Hz, signs encoder +1 motor +1 "
-                                 "(compiled defaults), header ",
+    "header=stale": ("identity", "firmware 0.1.0, protocol v2, N=8 at 1000 Hz, signs encoder +1 motor +1, "
+                                 "979.2 counts/turn (compiled defaults), header ",
                      "Fix: the board runs another design: flash this one with `rodctl flash`"),
 }
 
@@ -188,7 +190,7 @@ def test_fix_stores_the_measured_signs_and_the_next_power_on_passes(tmp_path):
     assert json.loads((tmp_path / "c.json").read_text())["stored"] == {"encoder_sign": -1, "motor_sign": -1}
     again, lines = check(url)
     assert again.returncode == 0, again.stdout
-    assert "signs encoder -1 motor -1 (stored on the board)" in lines["identity"]
+    assert "signs encoder -1 motor -1, 979.2 counts/turn (stored on the board)" in lines["identity"]
     assert all(ln.startswith("PASS") for ln in lines.values())
 
 
@@ -203,8 +205,40 @@ def test_unreadable_stored_settings_fall_back_to_the_compiled_defaults_and_say_s
     bad = tmp_path / "eeprom.bin"
     bad.write_bytes(b"RG\x01\xff\x01\x00\x12\x34")  # a record with a wrong CRC
     r = run_rodctl("status", "--port", f"sim://?eeprom={bad}", timeout=60)
-    assert "wiring      encoder_sign +1, motor_sign +1 (compiled defaults: the stored settings were unreadable)" \
-        in r.stdout
+    assert ("wiring      encoder_sign +1, motor_sign +1, counts_per_rev 979.2 counts/turn (compiled defaults: the "
+            "stored settings were unreadable)") in r.stdout
+
+
+def test_another_encoder_is_set_and_kept_on_the_board_without_a_reflash(tmp_path):
+    """An encoder with twice the counts: the check fails the hand's turn; `rodctl set counts_per_rev=1958.4 --save`
+    stores the rig's own counts (SAVE_RIG, the board's EEPROM a file here), and the board powered on again reads
+    the hand's quarter turn as a quarter turn and passes every step."""
+    url = f"sim://?counts_per_rev=1958.4&eeprom={tmp_path / 'eeprom.bin'}"
+    r = run_rodctl("set", "--port", url, "counts_per_rev=1958.4", "--save", timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert "counts_per_rev = 1958.4 counts/turn\n" in r.stdout
+    assert "stored on the board for every power-on: encoder_sign +1, motor_sign +1, counts_per_rev 1958.4 " \
+           "counts/turn" in r.stdout
+    again, lines = check(url, "--json", str(tmp_path / "c.json"))
+    assert again.returncode == 0, again.stdout
+    assert "979.2" not in lines["encoder"] and \
+        "signs encoder +1 motor +1, 1958.4 counts/turn (the design's 979.2) (stored on the board)" in lines["identity"]
+    values = {x["step"]: x["values"] for x in json.loads((tmp_path / "c.json").read_text())["results"]}
+    assert abs(values["encoder"]["turn_peak_deg"] - 90) < 8  # +490 counts of 1958.4: a quarter turn
+    assert 0.7 < values["motor"]["gain"] < 1.4
+
+
+def test_counts_per_rev_is_refused_out_of_range_and_while_armed():
+    from rodctl.link.session import Session
+    from rodgains.errors import UserError
+
+    r = run_rodctl("set", "--port", "sim://", "counts_per_rev=8", timeout=60)
+    assert r.returncode == 2 and r.stderr.strip().endswith(
+        "counts_per_rev=8 out of range: allowed 16 <= counts_per_rev <= 1e+06 counts/turn")
+    with Session("sim://?theta0_deg=175") as s:
+        s.arm(1)
+        with pytest.raises(UserError, match="refused counts_per_rev=1958.4 in mode"):
+            s.set("counts_per_rev", 1958.4)
 
 
 def test_signs_change_only_while_disarmed_and_only_to_plus_or_minus_one():

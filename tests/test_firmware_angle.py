@@ -1,10 +1,12 @@
-"""Encoder count to theta_1: exact wrap on 979.2 counts per turn, multi-turn, and the base rate."""
+"""Encoder count to theta_1: exact wrap on 979.2 counts per turn (or the rig's own), multi-turn, and the base rate."""
 
+import ctypes as C
 import math
 
 import pytest
 
-from firmware_sil import MODE, RAD_PER_COUNT, UPRIGHT, Sil, count_of
+from firmware_sil import ACK, MODE, RAD_PER_COUNT, UPRIGHT, Sil, count_of, library
+from rodctl.link import protocol as P
 
 
 def catch_torque(count: int) -> tuple[float, list[float]]:
@@ -79,3 +81,86 @@ def test_measured_theta_reported_outside_balance():
     assert mode == MODE["DISARMED"]
     assert theta == pytest.approx([count_of(1.0) * RAD_PER_COUNT] * sil.n, abs=1e-6)
     assert rate == [0.0] * sil.n
+
+
+# ---- counts per output turn as a run-time rig setting (SET COUNTS_PER_REV, SAVE_RIG) ----------------
+
+class Counts(C.Structure):
+    _fields_ = [("num", C.c_int32), ("den", C.c_int32), ("rad_per_tick", C.c_float), ("rad_per_count", C.c_float)]
+
+
+class Rig(C.Structure):
+    _fields_ = [("encoder_sign", C.c_int8), ("motor_sign", C.c_int8), ("counts", Counts)]
+
+
+def core():
+    lib = library()
+    lib.rod_counts_from_value.restype = C.c_bool
+    lib.rod_counts_from_value.argtypes = [C.c_float, C.POINTER(Counts)]
+    lib.rod_rig_decode.restype = C.c_uint8
+    lib.rod_rig_decode.argtypes = [C.c_char_p, C.c_size_t, Rig, C.POINTER(Rig)]
+    lib.rod_rig_encode.restype = None
+    lib.rod_rig_encode.argtypes = [C.POINTER(Rig), C.c_char_p]
+    return lib
+
+
+@pytest.mark.parametrize("value, fraction", [(979.2, (4896, 5)), (1958.4, (9792, 5)), (48.0, (48, 1)),
+                                             (500.5, (1001, 2)), (1000.0 / 3.0, (1000, 3)), (1e6, (1000000, 1))])
+def test_a_counts_value_becomes_its_exact_fraction(value, fraction):
+    """The board keeps counts per turn as the simplest num / den within 1e-4 count, so the gear ratio's
+    fraction (20.4 x 48 = 4896 / 5) lands every upright on an exact tick, as the compiled one does."""
+    c = Counts()
+    assert core().rod_counts_from_value(value, C.byref(c))
+    assert (c.num, c.den) == fraction
+
+
+@pytest.mark.parametrize("value", [1.0, 1e6 + 1.0, math.nan, math.inf, -979.2])
+def test_a_counts_value_out_of_range_is_refused(value):
+    assert not core().rod_counts_from_value(value, C.byref(Counts()))
+
+
+def test_another_counts_per_turn_reduces_the_count_exactly():
+    """SET counts_per_rev = 1958.4: upright is 979.2 counts; every 5 turns (9792 counts) gives the same catch
+    torque bit for bit, and a count reads count x 2 pi / 1958.4."""
+    def catch(count):
+        sil = Sil()
+        assert sil.set("COUNTS_PER_REV", 1958.4) == ACK["OK"]
+        return sil.catch_at(count), sil.status()[1]
+
+    base, theta = catch(979)
+    assert theta[0] - math.pi == pytest.approx((979 - 979.2) * 2 * math.pi / 1958.4, abs=1e-6)
+    for turns5 in (-3, 1, 40):
+        assert catch(979 + 9792 * turns5)[0] == base
+    sil = Sil()
+    assert sil.set("COUNTS_PER_REV", 8.0) == ACK["BAD_VALUE"]
+    sil.catch_at(490)
+    assert sil.set("COUNTS_PER_REV", 1958.4) == ACK["BAD_STATE"]
+
+
+def test_the_stored_rig_keeps_the_counts_and_reads_the_older_layout():
+    lib = core()
+    defaults = Rig(1, 1, Counts(4896, 5, 0.0, 0.0))
+    mine = Rig(-1, 1, Counts(9792, 5, 0.0, 0.0))
+    buf = C.create_string_buffer(16)
+    lib.rod_rig_encode(C.byref(mine), buf)
+    out = Rig()
+    assert lib.rod_rig_decode(buf.raw, 16, defaults, C.byref(out)) == 0x04  # STORED
+    assert (out.encoder_sign, out.motor_sign, out.counts.num, out.counts.den) == (-1, 1, 9792, 5)
+    assert out.counts.rad_per_count == pytest.approx(2 * math.pi / 1958.4, rel=1e-6)
+    # layout 1 (a board stored before counts were a setting): its signs, the compiled counts
+    old = b"RG\x01\xff\x01\x00" + P.crc16(b"RG\x01\xff\x01\x00").to_bytes(2, "little") + b"\xff" * 8
+    assert lib.rod_rig_decode(old, 16, defaults, C.byref(out)) == 0x04
+    assert (out.encoder_sign, out.counts.num, out.counts.den) == (-1, 4896, 5)
+    # a record with den 0 (valid CRC) or cut short is corrupt: the defaults, and HELLO says so
+    bad = bytearray(buf.raw)
+    bad[10:12] = b"\0\0"
+    bad[14:16] = P.crc16(bytes(bad[:14])).to_bytes(2, "little")
+    for data, n in ((bytes(bad), 16), (buf.raw, 8)):
+        assert lib.rod_rig_decode(data, n, defaults, C.byref(out)) == 0x08  # STORE_CORRUPT
+        assert (out.encoder_sign, out.counts.num) == (1, 4896)
+
+
+def test_a_counts_value_with_no_small_fraction_gets_the_closest_that_fits():
+    c = Counts()
+    assert core().rod_counts_from_value(314.159265, C.byref(c))
+    assert c.den <= 1000 and abs(c.num / c.den - 314.159265) < 1.2e-4  # 35500 / 113: 2.7e-5 count/turn off

@@ -31,7 +31,7 @@ def tlm(k: int, n: int = 5, mode=P.Mode.BALANCE) -> P.Telemetry:
 
 def _write(path, frames=300, start_us=0, **kw):
     w = LogWriter(path, simulator_metadata(load_params(), n=5), **kw)
-    hello = P.Hello(0, 1, 0, 1, 5, P.Mode.DISARMED, P.Reason.NONE, 0, 1000, 1, 0.01, 0.5, 0.5, 0.5, 0.2, bytes(range(32)))
+    hello = P.Hello(0, 1, 0, 1, 5, P.Mode.DISARMED, P.Reason.NONE, 0, 1000, 1, 0.01, 0.5, 0.5, 0.5, 0.2, bytes(range(32)), 4896, 5)
     w.write_frame(P.decode_frame(P.encode_hello(hello, seq=0, time_us=start_us)), host_time_s=0.0)
     for k in range(frames):
         mode = P.Mode.CATCH if k < 100 else P.Mode.BALANCE
@@ -327,7 +327,7 @@ def test_the_device_design_is_identified_by_its_header_hash():
 
 
 def test_unknown_design_is_recorded_as_unknown_with_the_hash():
-    hello = P.Hello(0, 1, 0, 1, 5, 0, 0, 0, 1000, 1, 0.01, 0.5, 0.5, 0.5, 0.2, b"\x11" * 32)
+    hello = P.Hello(0, 1, 0, 1, 5, 0, 0, 0, 1000, 1, 0.01, 0.5, 0.5, 0.5, 0.2, b"\x11" * 32, 4896, 5)
     meta = device_metadata(hello, port="/dev/ttyACM0")
     assert meta["params_source"] == "unknown" and meta["header_sha256"] == "11" * 32
     assert "params_json" not in meta

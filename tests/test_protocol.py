@@ -45,7 +45,8 @@ class Hello(C.Structure):
                 ("gains_schema", C.c_uint8), ("n", C.c_uint8), ("mode", C.c_uint8), ("reason", C.c_uint8),
                 ("rig", C.c_uint8), ("period_us", C.c_uint32), ("decimation", C.c_uint16), ("swing_amplitude", C.c_float),
                 ("swing_angle", C.c_float), ("catch_angle", C.c_float), ("heartbeat_timeout", C.c_float),
-                ("torque_max", C.c_float), ("header_sha256", C.c_uint8 * 32)]
+                ("torque_max", C.c_float), ("header_sha256", C.c_uint8 * 32),
+                ("counts_num", C.c_uint32), ("counts_den", C.c_uint16)]
 
 
 class Ack(C.Structure):
@@ -146,7 +147,7 @@ def c_decode(lib, wire: bytes):
     elif p.type == P.MsgType.HELLO:
         m = Hello()
         assert lib.rod_proto_decode_hello(C.byref(p), C.byref(m)) == 0
-        d = {k: getattr(m, k) for k, _ in Hello._fields_[:-1]}
+        d = {k: getattr(m, k) for k, _ in Hello._fields_ if k != "header_sha256"}
         d["header_sha256"] = bytes(m.header_sha256).hex()
     elif p.type == P.MsgType.ACK:
         m = Ack()
@@ -287,7 +288,7 @@ def test_c_encodes_vector(lib, case):
 @pytest.mark.parametrize("case", MESSAGES, ids=ids(MESSAGES))
 def test_c_decodes_vector(lib, case):
     p, d = c_decode(lib, bytes.fromhex(case["wire"]))
-    assert (p.version, p.type, p.seq, p.time_us) == (1, case["type"], case["seq"], case["time_us"])
+    assert (p.version, p.type, p.seq, p.time_us) == (P.VERSION, case["type"], case["seq"], case["time_us"])
     assert d == case["fields"]
 
 
@@ -383,9 +384,9 @@ def damaged_cases():
     body = bytearray(P.cobs_decode(set_[:-1]))
     body[-1] ^= 0x01
     bad_crc = P.cobs_encode(bytes(body)) + b"\0"
-    v2 = bytearray(P.cobs_decode(hb[:-1]))
-    v2[0] = 2
-    v2[-2:] = P.crc16(bytes(v2[:-2])).to_bytes(2, "little")
+    other = bytearray(P.cobs_decode(hb[:-1]))
+    other[0] = P.VERSION - 1  # the previous protocol's board
+    other[-2:] = P.crc16(bytes(other[:-2])).to_bytes(2, "little")
     long_packet = b"\x01\x10" + bytes(8) + bytes(range(1, 250)) * 3
     long_packet = long_packet[:P.MAX_PACKET + 1 - 2]
     too_long = P.cobs_encode(long_packet + P.crc16(long_packet).to_bytes(2, "little")) + b"\0"
@@ -393,7 +394,7 @@ def damaged_cases():
         "garbage": bytes(range(1, 200)) + b"\0",
         "truncated": hb[:6] + b"\0",
         "bad_crc": bad_crc,
-        "wrong_version": P.cobs_encode(bytes(v2)) + b"\0",
+        "wrong_version": P.cobs_encode(bytes(other)) + b"\0",
         "too_short": P.cobs_encode(b"\x01\x10\x00\x00\x00") + b"\0",
         "too_long_crc_valid": too_long,
         "oversize_no_delimiter_for_1000_bytes": b"\x55" * 1000 + b"\0",
@@ -628,7 +629,7 @@ def test_generated_header_offsets_match_the_wire_spec():
     h = (CORE / "rod_protocol_defs.h").read_text()
     for name, value in [("ROD_TELEMETRY_OFF_STEP_US", "20u"), ("ROD_TELEMETRY_OFF_THETA_HAT", "36u"),
                         ("ROD_TELEMETRY_OFF_RATE_HAT(n)", "(36u + 4u * (n))"), ("ROD_HELLO_OFF_HEADER_SHA256", "36u"),
-                        ("ROD_HELLO_PAYLOAD_SIZE", "68u"), ("ROD_ACK_OFF_MODE", "6u"), ("ROD_SET_OFF_VALUE", "1u"),
+                        ("ROD_HELLO_PAYLOAD_SIZE", "76u"), ("ROD_HELLO_OFF_COUNTS_NUM", "68u"), ("ROD_ACK_OFF_MODE", "6u"), ("ROD_SET_OFF_VALUE", "1u"),
                         ("ROD_PROTO_MAX_PACKET", "560u"), ("ROD_HDR_OFF_TIME_US", "6u")]:
         line = next(ln for ln in h.splitlines() if ln.startswith(f"#define {name} "))
         assert line.split(None, 2)[2].split("/*")[0].strip() == value, line

@@ -225,7 +225,7 @@ int rod_dev_status(float *est, int cap)
 
 void rod_dev_load_rig(const uint8_t *stored, size_t n)
 {
-    rod_device_load_rig(&vdev, stored, n, (rod_rig_t){1, 1});
+    rod_device_load_rig(&vdev, stored, n, rod_rig_defaults(1, 1));
 }
 
 size_t rod_dev_take_save(uint8_t *out, size_t cap)

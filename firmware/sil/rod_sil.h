@@ -86,10 +86,11 @@ ROD_SIL_API float rod_dev_duty(void);
 ROD_SIL_API int rod_dev_enable(void);
 ROD_SIL_API int rod_dev_reason(void);
 ROD_SIL_API int rod_dev_status(float *est, int cap);
-/* After rod_dev_reset, before the first step: the rig signs the board kept (8 bytes, rod_rig.h;
- * NULL / 0: none, the defaults +1 +1 apply), as the board reads them from its EEPROM at power-on. */
+/* After rod_dev_reset, before the first step: the rig settings the board kept (16 bytes, rod_rig.h;
+ * NULL / 0: none, the defaults +1 +1 and the header's counts per turn apply), as the board reads them
+ * from its EEPROM at power-on. */
 ROD_SIL_API void rod_dev_load_rig(const uint8_t *stored, size_t n);
-/* After a SAVE_RIG: copies the 8 bytes the board would write to its EEPROM and returns 8, once;
+/* After a SAVE_RIG: copies the 16 bytes the board would write to its EEPROM and returns 16, once;
  * otherwise 0. */
 ROD_SIL_API size_t rod_dev_take_save(uint8_t *out, size_t cap);
 /* Host -> device bytes; returns how many the emulated USB RX buffer (4096 bytes) took. */

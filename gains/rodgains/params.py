@@ -579,6 +579,19 @@ class Params:
             raw[section][key] = value
         return Params(validate(raw, source=self.source), source=self.source)
 
+    def with_counts_per_rev(self, counts: float) -> "Params":
+        """These parameters on a rig whose encoder gives `counts` per output turn (a board's run-time
+        counts_per_rev setting): encoder.counts_per_motor_rev = counts / motor.gear_ratio."""
+        if abs(counts - float(self.counts_per_rev)) <= 1e-4:
+            return self
+        gear = float(self["motor"]["gear_ratio"])
+        per_motor_turn = round(counts / gear)
+        if per_motor_turn < 1 or abs(per_motor_turn * gear - counts) > 1e-4:
+            raise ParamError(f"{counts:g} counts per output turn is not a whole number of counts per motor turn at "
+                             f"motor.gear_ratio {gear:g}: another gear ratio is another design (set it in the "
+                             "parameter file and flash)")
+        return self.with_overrides(f"encoder.counts_per_motor_rev={per_motor_turn}")
+
     def to_toml(self) -> str:
         """The resolved values as a complete parameter file, keeping the default file's comments."""
         out, section = [], None

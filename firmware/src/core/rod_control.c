@@ -23,8 +23,8 @@ void rod_control_init(rod_control_t *c)
     c->settings.heartbeat_timeout = ROD_HEARTBEAT_TIMEOUT_S;
     c->settings.heartbeat_timeout_us = seconds_to_us(ROD_HEARTBEAT_TIMEOUT_S);
     c->settings.decimation = 1;
-    c->settings.rig = (rod_rig_t){1, 1};
-    rod_angle_from_count(0, &c->angle);
+    c->settings.rig = rod_rig_defaults(1, 1);
+    rod_angle_from_count(0, &c->settings.rig.counts, &c->angle);
     rod_rate_filter_init(&c->filter, 0);
     rod_trim_init(&c->trim);
     rod_imu_init(&c->imu);
@@ -146,6 +146,18 @@ uint8_t rod_control_set(rod_control_t *c, uint8_t param, float value)
             s->rig.motor_sign = value < 0.0f ? (int8_t)-1 : (int8_t)1;
         }
         return ROD_ACK_OK;
+    case ROD_PARAM_COUNTS_PER_REV: {
+        rod_counts_t counts;
+        if (!within(value, ROD_PARAM_COUNTS_PER_REV_MIN, false, ROD_PARAM_COUNTS_PER_REV_MAX, false)
+            || !rod_counts_from_value(value, &counts)) {
+            return ROD_ACK_BAD_VALUE;
+        }
+        if (rod_mode_is_armed(c->mode)) {
+            return ROD_ACK_BAD_STATE;
+        }
+        s->rig.counts = counts; /* the count itself is unchanged: 0 is still the boot's hanging */
+        return ROD_ACK_OK;
+    }
     default:
         return ROD_ACK_BAD_VALUE;
     }
@@ -294,8 +306,8 @@ void rod_control_step(rod_control_t *c, const rod_inputs_t *in, uint32_t heartbe
 
     c->count = count;
     c->driver_fault = in->driver_fault;
-    rod_angle_from_count(count, &c->angle);
-    c->rate = rod_rate_filter_step(&c->filter, count);
+    rod_angle_from_count(count, &c->settings.rig.counts, &c->angle);
+    c->rate = rod_rate_filter_step(&c->filter, count, c->settings.rig.counts.rad_per_count);
 #if ROD_NY > 1
     c->imu_reading = in->imu;
     /* the part is mounted turned by the tilt: turn its accelerometer back into the rod's frame */

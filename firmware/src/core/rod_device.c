@@ -189,6 +189,8 @@ static void queue_hello(rod_device_t *dev, uint32_t now_us)
     for (int i = 0; i < 32; i++) {
         h->header_sha256[i] = gains_sha256[i];
     }
+    h->counts_num = (uint32_t)c->settings.rig.counts.num;
+    h->counts_den = (uint16_t)c->settings.rig.counts.den;
     rod_link_publish_event(&dev->link);
 }
 

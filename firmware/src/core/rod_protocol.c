@@ -361,6 +361,9 @@ size_t rod_proto_encode_hello(const rod_msg_hello_t *m, uint32_t seq, uint32_t t
     for (uint32_t i = 0; i < ROD_HELLO_LEN_HEADER_SHA256; i++) {
         wr_u8(&w, m->header_sha256[i], 1);
     }
+    wr_u32(&w, m->counts_num, 1);
+    wr_u16(&w, m->counts_den, 1);
+    wr_u16(&w, 0u, 1); /* reserved3 */
     return wr_finish(&w, out, 1);
 }
 
@@ -544,6 +547,8 @@ int rod_proto_decode_hello(const rod_packet_t *p, rod_msg_hello_t *m)
     m->heartbeat_timeout = get_f32(q + ROD_HELLO_OFF_HEARTBEAT_TIMEOUT);
     m->torque_max = get_f32(q + ROD_HELLO_OFF_TORQUE_MAX);
     memcpy(m->header_sha256, q + ROD_HELLO_OFF_HEADER_SHA256, ROD_HELLO_LEN_HEADER_SHA256);
+    m->counts_num = get_u32(q + ROD_HELLO_OFF_COUNTS_NUM);
+    m->counts_den = (uint16_t)get_u16(q + ROD_HELLO_OFF_COUNTS_DEN);
     return ROD_DECODE_OK;
 }
 

@@ -41,6 +41,8 @@ typedef struct {
     uint16_t decimation;
     float swing_amplitude, swing_angle, catch_angle, heartbeat_timeout, torque_max;
     uint8_t header_sha256[32];
+    uint32_t counts_num; /* encoder counts per output turn = counts_num / counts_den */
+    uint16_t counts_den;
 } rod_msg_hello_t;
 
 /* Device -> host, after each telemetry frame of a firmware with the tip IMU. */

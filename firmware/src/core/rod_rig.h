@@ -1,12 +1,15 @@
-/* rod_rig.h -- the rig's wiring signs, and the bytes that keep them on the board.
+/* rod_rig.h -- the rig's wiring signs and encoder counts per output turn, and the bytes that keep
+ * them on the board.
  *
- * A reversed encoder or motor is a wiring fact, not a design: `rodctl check` measures it and
- * SAVE_RIG stores it, so the fix needs no reflash. The portable core applies the signs (count ->
- * angle, duty -> driver), so the SIL exercises them; the board only keeps the bytes (EEPROM) and
- * hands them back at power-on.
+ * A reversed encoder or motor, or another encoder or gear ratio, is a fact of the rig, not of the
+ * design: `rodctl check` measures it and SAVE_RIG stores it, so the fix needs no reflash. The
+ * portable core applies them (count -> angle, duty -> driver), so the SIL exercises them; the board
+ * only keeps the bytes (EEPROM) and hands them back at power-on.
  *
- * Stored layout (ROD_RIG_STORE_SIZE bytes): 'R' 'G' | layout 1 | encoder_sign (int8) |
- * motor_sign (int8) | 0 | CRC-16/CCITT-FALSE of the first 6 bytes, little-endian.
+ * Stored layout 2 (ROD_RIG_STORE_SIZE bytes, little-endian): 'R' 'G' | 2 | encoder_sign (int8) |
+ * motor_sign (int8) | 0 | counts num (u32) | counts den (u16) | 0 0 | CRC-16/CCITT-FALSE of the
+ * first 14 bytes. Layout 1 (the first 8 bytes: signs, then the CRC of bytes 0-5 at 6-7) is still
+ * read, with the compiled counts per turn.
  */
 #ifndef ROD_RIG_H
 #define ROD_RIG_H
@@ -14,16 +17,22 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "rod_angle.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
 
-#define ROD_RIG_STORE_SIZE 8u
+#define ROD_RIG_STORE_SIZE 16u
 
 typedef struct {
     int8_t encoder_sign; /* +1, or -1: the count runs backwards */
     int8_t motor_sign;   /* +1, or -1: a positive duty turns the rod clockwise */
+    rod_counts_t counts; /* encoder counts per output turn */
 } rod_rig_t;
+
+/* These signs with the header's counts per turn. */
+rod_rig_t rod_rig_defaults(int8_t encoder_sign, int8_t motor_sign);
 
 void rod_rig_encode(const rod_rig_t *rig, uint8_t out[ROD_RIG_STORE_SIZE]);
 

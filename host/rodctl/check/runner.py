@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from typing import Callable
 
-import time
 
 from rodctl.check.results import Report, Result
 from rodctl.check.steps import STEPS, Context
@@ -40,10 +39,6 @@ def sign_fixes(ctx: Context) -> dict[str, int]:
 
 def store_signs(session, fixes: dict[str, int]) -> dict[str, float]:
     """SET each sign, then SAVE_RIG; returns the signs the board reports afterwards (HELLO)."""
-    from rodctl.link import protocol as P
-
     for name, sign in fixes.items():
         session.set(name, float(sign))
-    session.command(P.SaveRig(), what="save-rig")
-    time.sleep(0.05)  # the board writes its EEPROM in its main loop, after the ACK
-    return hello_settings(session.request_hello())
+    return session.save_rig()

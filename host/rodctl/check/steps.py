@@ -43,7 +43,9 @@ class Context:
         self.user = user
         self.say = say
         self.flash_hint = flash_hint
-        self.cpr = counts_per_rev(params)
+        self.design_cpr = counts_per_rev(params)
+        # the board's own (a run-time rig setting, stored with the signs); the design's when it does not say
+        self.cpr = hello_settings(session.hello)["counts_per_rev"] if session.hello.counts_den else self.design_cpr
         self.rest: dict | None = None  # the loop step's recording of the rod at rest (the encoder step reads it)
         self.encoder_reversed: bool | None = None  # from the hand step; None: not measured
         self.motor_reversed: bool | None = None  # from the pulses, once the encoder's sign is known
@@ -74,9 +76,12 @@ def identity(ctx: Context) -> Result:
     values = {"firmware_version": fw, "protocol_version": P.VERSION, "gains_schema": int(h.gains_schema),
               "header_sha256": board, "design_sha256": want, "n": int(h.n), "period_us": int(h.period_us)}
     signs = hello_settings(h)
-    values.update(encoder_sign=int(signs["encoder_sign"]), motor_sign=int(signs["motor_sign"]), signs_from=rig_source(h))
+    values.update(encoder_sign=int(signs["encoder_sign"]), motor_sign=int(signs["motor_sign"]), signs_from=rig_source(h),
+                  counts_per_rev=ctx.cpr, design_counts_per_rev=ctx.design_cpr)
+    own = abs(ctx.cpr - ctx.design_cpr) > 1e-4  # the board holds its fraction to 1e-4 count
+    counts = f"{ctx.cpr:.6g} counts/turn" + (f" (the design's {ctx.design_cpr:.6g})" if own else "")
     seen = (f"firmware {fw}, protocol v{P.VERSION}, N={h.n} at {1e6 / h.period_us:g} Hz, "
-            f"signs encoder {signs['encoder_sign']:+.0f} motor {signs['motor_sign']:+.0f} ({rig_source(h)}), "
+            f"signs encoder {signs['encoder_sign']:+.0f} motor {signs['motor_sign']:+.0f}, {counts} ({rig_source(h)}), "
             f"header {board[:12]}")
     if board != want:
         return Result("identity", FAIL, f"{seen}, but the design of {ctx.label} is {want[:12]}",
@@ -185,8 +190,9 @@ def encoder(ctx: Context) -> Result:
     if not lo <= ctx.deg(peak) <= hi:
         factor = ctx.deg(peak) / 90.0
         return Result("encoder", FAIL, seen + f", {factor:.1f} x a quarter turn",
-                      f"the counts per output turn are not {ctx.cpr:g}: check encoder.counts_per_motor_rev and "
-                      f"motor.gear_ratio in {ctx.label} (a gearmotor of another ratio?)", values)
+                      f"the counts per output turn are not {ctx.cpr:.6g}: check encoder.counts_per_motor_rev and "
+                      f"motor.gear_ratio in {ctx.label} (a gearmotor of another ratio?); for another encoder on "
+                      "this gearbox, `rodctl set counts_per_rev=N --save` keeps the rig's own on the board", values)
     return Result("encoder", PASS, seen, values=values)
 
 
@@ -206,6 +212,7 @@ def motor(ctx: Context) -> Result:
     if ctx.driver_faulted():
         return Result("motor", SKIP, "no pulse", "the driver reports a fault (see driver)")
     exp, model = planned_pulse(ctx.params)
+    model = model * (ctx.cpr / ctx.design_cpr)  # the model's counts are the design's; the board counts its own
     ctx.say(f"motor: {exp.describe().split(': ', 1)[1]} (the rod hanging, nothing in its way)")
     ctx.ensure_disarmed()
     _wait_still(ctx)

@@ -188,12 +188,15 @@ def default_log_name(fmt: str) -> str:
     return f"rod-{stamp}.{fmt if fmt in ('parquet', 'mcap') else 'csv'}"
 
 
-def apply_settings(s: Session, assignments: list[str], args=None, out=print) -> None:
+def apply_settings(s: Session, assignments: list[str], args=None, out=print, kept: bool = False) -> None:
+    """SET every NAME=VALUE (all or none) and print what the board reports; `kept`: a SAVE_RIG follows, so the
+    rig settings are not said to last only until the board resets."""
     parsed = [parse_assignment(a) for a in assignments]  # all names and numbers checked before anything is sent
     params, _ = design_params(s, args)  # for the catch angle's range (the balance angle limit)
     now = s.set_all(parsed, design_params=params)  # every value range-checked, then all applied or none
     for setting, value in parsed:
-        out(f"{setting.name} = {setting.format(now[setting.name])} (until the board resets)")
+        lasts = "" if kept and setting.hello_field == "rig" else " (until the board resets)"
+        out(f"{setting.name} = {setting.format(now[setting.name])}{lasts}")
 
 
 def device_port(args) -> str | None:

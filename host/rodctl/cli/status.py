@@ -60,12 +60,18 @@ def run_status(args) -> int:
     print(f"settings    swing_amplitude {st['swing_amplitude']:.4g} N m, swing_angle_deg {st['swing_angle_deg']:.4g}, "
           f"catch_angle_deg {st['catch_angle_deg']:.4g}, telemetry_decimation {st['telemetry_decimation']:g}, "
           f"heartbeat_timeout {st['heartbeat_timeout']:.3g} s (torque max {r['torque_max_Nm']:.3g} N m)")
-    print(f"wiring      encoder_sign {st['encoder_sign']:+.0f}, motor_sign {st['motor_sign']:+.0f} ({r['signs_from']})")
+    print(f"wiring      {rig_text(st)} ({r['signs_from']})")
     th = ", ".join(f"{from_upright_deg(x):+.1f}" for x in r["theta_hat_rad"])
     print(f"telemetry   encoder {r['encoder_count']} counts, theta_hat [{th}] deg from upright, base rate "
           f"{r['base_rate_rad_s']:.3g} rad/s, torque {r['torque_Nm']:.3g} N m, duty {r['duty']:.3g}")
     print(f"counters    overruns {r['overruns']}, frames dropped {r['frames_dropped']}, rx errors {r['rx_errors']}")
     return 0
+
+
+def rig_text(settings: dict) -> str:
+    """The rig settings of a HELLO (hello_settings) on one line."""
+    return (f"encoder_sign {settings['encoder_sign']:+.0f}, motor_sign {settings['motor_sign']:+.0f}, "
+            f"counts_per_rev {settings['counts_per_rev']:.6g} counts/turn")
 
 
 def run_disarm(args) -> int:
@@ -94,7 +100,10 @@ def run_set(args) -> int:
     for a in args.assignments:
         parse_assignment(a)
     with stop_signals(), session_for(args) as s:
-        apply_settings(s, args.assignments, args)
+        apply_settings(s, args.assignments, args, kept=args.save)
+        if args.save:
+            now = s.save_rig()
+            print(f"stored on the board for every power-on: {rig_text(now)}")
     return 0
 
 
@@ -120,6 +129,9 @@ def register(sub) -> None:
                        description=f"Change run-time settings on the board until it resets. Names: {names}. "
                                    "The board checks the bounds; a refused value is reported with its range.")
     p.add_argument("assignments", nargs="+", metavar="NAME=VALUE")
+    p.add_argument("--save", action="store_true",
+                   help="then store the rig settings (encoder_sign, motor_sign, counts_per_rev) on the board, "
+                        "read at every power-on (SAVE_RIG)")
     add_port_arg(p)
     add_design_args(p)
     p.set_defaults(func=run_set)

@@ -177,6 +177,19 @@ class SignSetting(Setting):
         return -1.0 if int(hello.rig) & int(self.flag) else 1.0
 
 
+class CountsSetting(Setting):
+    """Encoder counts per output turn: set while disarmed, reported in HELLO as counts_num / counts_den,
+    kept by SAVE_RIG. The board holds the simplest fraction with a denominator up to 1000 within 1e-4
+    count of the value."""
+
+    def __init__(self):
+        super().__init__("counts_per_rev", P.Param.COUNTS_PER_REV, "counts/turn", "rig")
+
+    def value_of(self, hello) -> float:
+        den = int(hello.counts_den)
+        return int(hello.counts_num) / den if den else float("nan")
+
+
 _DEG = math.pi / 180.0
 SETTINGS = {s.name: s for s in (
     Setting("swing_amplitude", P.Param.SWING_AMPLITUDE, "N m", "swing_amplitude"),
@@ -186,6 +199,7 @@ SETTINGS = {s.name: s for s in (
     Setting("heartbeat_timeout", P.Param.HEARTBEAT_TIMEOUT, "s", "heartbeat_timeout"),
     SignSetting("encoder_sign", P.Param.ENCODER_SIGN, P.RigFlag.ENCODER_REVERSED),
     SignSetting("motor_sign", P.Param.MOTOR_SIGN, P.RigFlag.MOTOR_REVERSED),
+    CountsSetting(),
 )}
 
 
@@ -678,6 +692,13 @@ class Session:
                 raise UserError(f"device refused {setting.name}={value:g}: allowed "
                                 f"{setting.allowed(self.hello, design_params)}") from None
             raise
+
+    def save_rig(self) -> dict[str, float]:
+        """SAVE_RIG: store the rig settings in use (signs, counts per turn) on the board for every
+        power-on; returns the settings its HELLO reports afterwards (user units)."""
+        self.command(P.SaveRig(), what="save-rig")
+        time.sleep(0.05)  # the board writes its EEPROM in its main loop, after the ACK
+        return hello_settings(self.request_hello())
 
     def set_all(self, pairs: list[tuple[Setting, float]], design_params=None) -> dict[str, float]:
         """Apply every (setting, value) or none; returns the device's settings afterwards (user units).

@@ -38,6 +38,7 @@ def _settings_json(hello) -> str:
         "catch_angle_rad": float(hello.catch_angle),
         "heartbeat_timeout_s": float(hello.heartbeat_timeout),
         "torque_max_Nm": float(hello.torque_max),
+        "counts_per_rev": int(hello.counts_num) / int(hello.counts_den) if hello.counts_den else None,
     }, sort_keys=True)
 
 
@@ -113,6 +114,7 @@ def simulator_metadata(params, *, n: int | None = None, period_us: int | None = 
         "swing_amplitude_Nm": sw["amplitude"], "swing_angle_rad": math.radians(sw["angle_deg"]),
         "catch_angle_rad": math.radians(sw["catch_angle_deg"]),
         "heartbeat_timeout_s": params["safety"]["heartbeat_timeout"], "torque_max_Nm": params.torque_max,
+        "counts_per_rev": float(params.counts_per_rev),
     }
     return {
         "rodctl-log": FORMAT_VERSION,
@@ -134,6 +136,18 @@ def simulator_metadata(params, *, n: int | None = None, period_us: int | None = 
         "host_start_unix_s": f"{time.time():.6f}",
         "params_json": params.canonical_json(),
     }
+
+
+def counts_per_rev_of(meta: dict, params=None) -> float | None:
+    """Encoder counts per output turn the board reduced the log's counts with: its run-time setting (the
+    HELLO in the metadata), else the parameters' (None when neither is known)."""
+    try:
+        value = json.loads(meta.get("settings") or "{}").get("counts_per_rev")
+    except (ValueError, AttributeError):
+        value = None
+    if value:
+        return float(value)
+    return float(params.counts_per_rev) if params is not None else None
 
 
 def params_of(meta: dict):

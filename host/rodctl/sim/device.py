@@ -40,6 +40,7 @@ from typing import Callable
 from rodctl.sim.faults import STALE_OVERRIDE_KEY, STALE_FACTOR, Faults, Hand
 
 PLANT_KINDS = ("inextensible", "der")
+RIG_STORE_BYTES = 16  # rod_rig.h ROD_RIG_STORE_SIZE: what SAVE_RIG writes to the EEPROM
 
 _POOL_LOCK = threading.Lock()
 _POOL: dict[str, list[ctypes.CDLL]] = {}
@@ -154,7 +155,7 @@ class VirtualDevice:
         self.eeprom_path = Path(eeprom) if eeprom else None
         self.eeprom = self.eeprom_path.read_bytes() if self.eeprom_path and self.eeprom_path.is_file() else b""
         self.lib.rod_dev_load_rig(self.eeprom or None, len(self.eeprom))
-        self._save_buf = ctypes.create_string_buffer(16)
+        self._save_buf = ctypes.create_string_buffer(RIG_STORE_BYTES)
         self.steps = 0
         self._closed = False
         f = self.faults
@@ -247,8 +248,9 @@ class VirtualDevice:
             duty = 0.0
         plant.advance(duty * f.motor_sign, self.period)
         self.steps += 1
-        if lib.rod_dev_take_save(self._save_buf, 16):
-            self._store(self._save_buf.raw[:8])
+        n = lib.rod_dev_take_save(self._save_buf, RIG_STORE_BYTES)
+        if n:
+            self._store(self._save_buf.raw[:n])
 
     def _store(self, data: bytes) -> None:
         """SAVE_RIG: the bytes the board writes to its EEPROM."""

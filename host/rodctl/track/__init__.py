@@ -84,7 +84,7 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     file (its length, and the design's N). markers: on the rod besides the axis's (default N). view:
     a rodctl.track.calibrate.View (lens and tilt removed, scale from the checkerboard)."""
     from rodctl.logs import read_log
-    from rodctl.logs.metadata import params_of
+    from rodctl.logs.metadata import counts_per_rev_of, params_of
 
     log = read_log(log_path)
     data = log.data
@@ -97,8 +97,7 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     markers = int(markers or n_edges)
     if not 2 <= markers <= 64:
         raise InputError(f"--markers {markers}: between 2 and 64 markers on the rod")
-    rig = lp if lp is not None else p
-    cpr = float(rig["encoder"]["counts_per_motor_rev"]) * float(rig["motor"]["gear_ratio"])
+    cpr = counts_per_rev_of(log.meta, lp if lp is not None else p)
 
     video = Video(video_path)
     detector = Detector(color or ColorRange.parse(None))

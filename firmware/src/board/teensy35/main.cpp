@@ -263,9 +263,10 @@ void setup()
     {
         uint8_t stored[ROD_RIG_STORE_SIZE];
         board_storage_read(stored, sizeof stored);
-        // BOARD_*_SIGN are the compiled defaults, for a board with nothing (or nothing readable) stored
+        // BOARD_*_SIGN and the header's counts per turn are the compiled defaults, for a board with
+        // nothing (or nothing readable) stored
         rod_device_load_rig(&device, stored, sizeof stored,
-                            (rod_rig_t){(int8_t)BOARD_ENCODER_SIGN, (int8_t)BOARD_MOTOR_DIR_SIGN});
+                            rod_rig_defaults((int8_t)BOARD_ENCODER_SIGN, (int8_t)BOARD_MOTOR_DIR_SIGN));
     }
 
     control_timer.priority(BOARD_CONTROL_IRQ_PRIORITY);  // before begin(): begin applies it
