@@ -32,7 +32,15 @@ def run_rodctl(*args, timeout: float = 120, env: dict | None = None, input: str 
                           env=env or rodctl_env(), input=input)
 
 
+def ctrl_c_as_at_a_terminal() -> None:
+    """Popen preexec_fn: a shell starts background jobs (nohup, `cmd &` in a script, so possibly this test run)
+    with SIGINT ignored, and a child would inherit that and never see a test's Ctrl-C: give it the
+    disposition a terminal gives."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def start_rodctl(*args, env: dict | None = None, **kw) -> subprocess.Popen:
+    kw.setdefault("preexec_fn", ctrl_c_as_at_a_terminal)
     return subprocess.Popen([*RODCTL, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=env or rodctl_env(), **kw)
 

@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
+from host_tools import ctrl_c_as_at_a_terminal
 
 from rodgains.params import load_params
 
@@ -349,12 +350,6 @@ def _finished_trials(study: Path) -> int:
     return sum(1 for t in s.trials if t.state.name == "COMPLETE")
 
 
-def _ctrl_c_as_at_a_terminal() -> None:
-    # A shell starts background jobs (nohup, `cmd &` in a script) with SIGINT ignored, and the child
-    # would inherit that and never see the Ctrl-C below: give it the disposition a terminal gives.
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 def test_ctrl_c_keeps_finished_trials_and_the_study_resumes(tmp_path):
     study, out = tmp_path / "study", tmp_path / "tuned.toml"
     argv = [sys.executable, "-m", "rodctl.cli", "tune", "--cases", "nominal", "--samples", "0", "--seconds", "0.5",
@@ -362,7 +357,7 @@ def test_ctrl_c_keeps_finished_trials_and_the_study_resumes(tmp_path):
     # PYTHONFAULTHANDLER: if it hangs after Ctrl-C, SIGABRT makes it print where every thread is
     p = subprocess.Popen(argv + ["--budget", "1000"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          start_new_session=True, env={**os.environ, "PYTHONFAULTHANDLER": "1"},
-                         preexec_fn=_ctrl_c_as_at_a_terminal)
+                         preexec_fn=ctrl_c_as_at_a_terminal)
     try:
         deadline = time.monotonic() + 180
         while _finished_trials(study) < 2:

@@ -14,7 +14,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from host_tools import RODCTL, rodctl_env
+from host_tools import RODCTL, ctrl_c_as_at_a_terminal, rodctl_env
 
 from rodctl.link import protocol as P
 
@@ -43,7 +43,7 @@ def _start_scope(display: str, *args):
     env = rodctl_env(DISPLAY=display)
     env.pop("MPLBACKEND", None)
     return subprocess.Popen([*RODCTL, "scope", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=env)
+                            env=env, preexec_fn=ctrl_c_as_at_a_terminal)
 
 
 def _wait_for_window(proc, seconds: float = 60.0) -> None:
