@@ -57,4 +57,4 @@ def planned_pulse(params) -> tuple[Experiment, np.ndarray]:
 
 def counts_per_rev(params) -> float:
     """Encoder counts per output turn the firmware of these parameters assumes."""
-    return float(params["encoder"]["counts_per_motor_rev"]) * float(params["motor"]["gear_ratio"])
+    return float(params.counts_per_rev)

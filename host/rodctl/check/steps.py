@@ -14,7 +14,7 @@ from rodctl.check.model import counts_per_rev, planned_pulse
 from rodctl.check.record import Recording
 from rodctl.check.results import FAIL, PASS, SKIP, Result
 from rodctl.link import protocol as P
-from rodctl.link.session import hello_settings, name_of, reason_text, rig_source
+from rodctl.link.session import hello_counts_per_rev, hello_settings, name_of, reason_text, rig_source
 
 LOOP_S = 2.0  # loop-health window [s]
 REST_NOISE_COUNTS = 1  # a still rod's count may flicker this much (one edge) [counts]
@@ -45,7 +45,7 @@ class Context:
         self.flash_hint = flash_hint
         self.design_cpr = counts_per_rev(params)
         # the board's own (a run-time rig setting, stored with the signs); the design's when it does not say
-        self.cpr = hello_settings(session.hello)["counts_per_rev"] if session.hello.counts_den else self.design_cpr
+        self.cpr = hello_counts_per_rev(session.hello) or self.design_cpr
         self.rest: dict | None = None  # the loop step's recording of the rod at rest (the encoder step reads it)
         self.encoder_reversed: bool | None = None  # from the hand step; None: not measured
         self.motor_reversed: bool | None = None  # from the pulses, once the encoder's sign is known

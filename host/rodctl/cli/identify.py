@@ -201,7 +201,7 @@ def run_port(args) -> int:
 def _run_and_fit(args, exps, log_dir: Path, stamp: str) -> int:
     from rodctl.cli.common import design_params, stop_signals
     from rodctl.link import protocol as P
-    from rodctl.link.session import Session, hello_settings, reason_text
+    from rodctl.link.session import Session, hello_counts_per_rev, reason_text
 
     logs = []
     with stop_signals(), Session(args.port) as session:
@@ -210,7 +210,9 @@ def _run_and_fit(args, exps, log_dir: Path, stamp: str) -> int:
             params, source = _nominal(args)
         h = session.hello
         # the board reduces counts with its own counts per turn (a rig setting); the fit reads them the same way
-        params = params.with_counts_per_rev(hello_settings(h)["counts_per_rev"])
+        board_counts = hello_counts_per_rev(h)
+        if board_counts:
+            params = params.with_counts_per_rev(board_counts)
         if h.decimation != 1:
             session.set("telemetry_decimation", 1)  # the fit replays every period's duty
         print(f"identify: {session.port}, firmware N={h.n} at {1e6 / h.period_us:g} Hz; nominal parameters: {source}",

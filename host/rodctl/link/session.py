@@ -186,8 +186,14 @@ class CountsSetting(Setting):
         super().__init__("counts_per_rev", P.Param.COUNTS_PER_REV, "counts/turn", "rig")
 
     def value_of(self, hello) -> float:
-        den = int(hello.counts_den)
-        return int(hello.counts_num) / den if den else float("nan")
+        counts = hello_counts_per_rev(hello)
+        return float("nan") if counts is None else counts
+
+
+def hello_counts_per_rev(hello) -> float | None:
+    """Encoder counts per output turn a HELLO reports (counts_num / counts_den); None when it says none."""
+    den = int(hello.counts_den)
+    return int(hello.counts_num) / den if den else None
 
 
 _DEG = math.pi / 180.0

@@ -16,6 +16,7 @@ from rodgains.errors import UserError
 
 from rodctl import __version__, paths
 from rodctl.link import protocol as P
+from rodctl.link.session import hello_counts_per_rev
 from rodctl.logs.schema import FORMAT_VERSION
 
 
@@ -38,7 +39,7 @@ def _settings_json(hello) -> str:
         "catch_angle_rad": float(hello.catch_angle),
         "heartbeat_timeout_s": float(hello.heartbeat_timeout),
         "torque_max_Nm": float(hello.torque_max),
-        "counts_per_rev": int(hello.counts_num) / int(hello.counts_den) if hello.counts_den else None,
+        "counts_per_rev": hello_counts_per_rev(hello),
     }, sort_keys=True)
 
 

@@ -161,7 +161,7 @@ class VirtualDevice:
         f = self.faults
         # the encoder's own counts per output turn, and where the board took its zero at boot
         rig = self.plant_params if self.plant_params is not None else self.params
-        self._nominal_cpr = float(rig["encoder"]["counts_per_motor_rev"]) * float(rig["motor"]["gear_ratio"])
+        self._nominal_cpr = float(rig.counts_per_rev)
         self._count_scale = (f.counts_per_rev / self._nominal_cpr) if f.counts_per_rev else 1.0
         self._boot_offset = 0
         if f.boot_angle_deg:
