@@ -169,17 +169,18 @@ RIG_S4_1 = ("motor.rotor_inertia=4.0236e-07", "motor.viscous_friction=6.1149e-04
          "rod.damping=1.2413e-03")
 
 
-def test_on_rig_s4_1_only_the_stiffer_shaft_holds_the_damped_rod():
+def test_on_rig_s4_1_only_the_stiffer_shaft_holds_the_damped_rod_soon():
     """What the second stage is for, on the real plant: the design from rig s4_1's values with 1.4 x its
-    dry friction compensated lets a rod ten times more damped than its model end bent out of its 3 deg
-    band at lqr.q_shaft_angle 325, and holds it straight at 400."""
+    dry friction compensated leaves a rod ten times more damped than its model bent out of its 3 deg band
+    6 s after the release at lqr.q_shaft_angle 325 (it settles after 10.6 s), and holds it straight within
+    3.4 s at 400."""
     from rodctl.sim.matrix import CASES, IDEAL_GEARBOX, ROBUST_BAND_DEG, run_case
 
     p = load_params(None, list(RIG_S4_1) + ["lqr.friction_compensation=7.1845e-03", *IDEAL_GEARBOX])
-    ends = {q: run_case(p.with_overrides(f"lqr.q_shaft_angle={q!r}"), CASES["damping*10"], "balance")
+    ends = {q: run_case(p.with_overrides(f"lqr.q_shaft_angle={q!r}"), CASES["damping*10"], "balance", seconds=6.0)
             for q in (325.0, 400.0)}
     assert not ends[325.0]["passed"] and ends[325.0]["final_dev_deg"] > 2 * ROBUST_BAND_DEG, ends[325.0]
-    assert ends[400.0]["passed"] and ends[400.0]["final_dev_deg"] < 0.5, ends[400.0]
+    assert ends[400.0]["passed"] and ends[400.0]["final_dev_deg"] < 0.5 and ends[400.0]["settle_s"] < 4.0, ends[400.0]
 
 
 def test_rig_a_meets_the_nominal_goals_with_the_chosen_compensation(tmp_path):

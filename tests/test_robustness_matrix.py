@@ -1,10 +1,9 @@
 """The firmware judged on the faithful plant, every case of the robustness matrix, both tasks (issues 8, 31).
 
-The whole matrix runs once per session (module fixture, ~20 s CPU on two cores). The pass rules are
+The whole matrix runs once per session (module fixture, ~60 s CPU). The pass rules are
 rodctl.sim.matrix.criterion(task) (nominal: the stricter goals). With the gearbox's play the rod rests
-on one flank of the gap and now and then crosses to the other (docs/control.md), so a run that ends
-during a crossing ends outside the band: the in-range runs are held to a pass share, the known
-failures are listed with their reasons, and no run may fault.
+on one flank of the gap 2 to 2.8 deg off upright (docs/control.md), near the 3 deg band: the in-range
+runs are held to a pass share, the known failures are listed with their reasons, and no run may fault.
 """
 
 import pytest
@@ -46,6 +45,17 @@ def test_the_nominal_rig_with_play_holds_the_rod_within_the_matrix_band(results)
     b, s = results[("nominal", "balance")], results[("nominal", "swingup")]
     assert b["final_dev_deg"] < 3.5 and s["final_dev_deg"] < 3.5, (b, s)
     assert s["caught_at_s"] <= matrix.SWINGUP_CATCH_GOAL_S and s["base_turns_max"] <= matrix.SWINGUP_TURNS_GOAL
+
+
+def test_on_a_rig_with_play_the_balanced_rod_stays_on_its_flank_instead_of_hunting():
+    """The set-point trim reads the whole torque, friction compensation included: the rod rests on one
+    flank. Reading the torque net of the compensation, it crossed the gap every 5 to 15 s with the tip
+    swinging out 12 to 13 deg (docs/control.md "Finding upright")."""
+    r = matrix.run_case(load_params(), matrix.CASES["nominal"], "balance", seconds=40.0, keep_log=True)
+    log = r["log"]
+    late = log["time"] >= 10.0
+    dev = matrix._deviation_deg(log["theta"][late]).max(axis=1)
+    assert dev.max() <= 3.0 and dev.mean() <= 2.8, (dev.max(), dev.mean())
 
 
 def test_with_an_ideal_gearbox_the_nominal_meets_the_goals_of_issue_8():

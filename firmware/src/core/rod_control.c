@@ -340,7 +340,9 @@ void rod_control_step(rod_control_t *c, const rod_inputs_t *in, uint32_t heartbe
             drive.torque = 0.0f;
         } else if (c->mode == ROD_MODE_BALANCE) {
             rod_observer_hold(&c->obs, drive.torque - friction);
-            rod_trim_update(&c->trim, drive.torque - friction, quasi_static(c));
+            /* the trim reads the whole torque: the compensation follows the estimated rate's sign, and
+             * while the motor dithers on a flank its mean is a steady push on the rod like any other */
+            rod_trim_update(&c->trim, drive.torque, quasi_static(c));
         }
     }
 

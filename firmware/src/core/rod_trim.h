@@ -7,14 +7,15 @@
  * exactly, with no quantization. So the trim moves the balance set-point (the encoder angle the
  * estimator calls upright) while the steady torque lasts:
  *
- *     hold += ROD_TRIM_HOLD_K (u - hold)                     low-passed torque of the rod's model
+ *     hold += ROD_TRIM_HOLD_K (u - hold)                     low-passed torque given, compensation included
  *     while every estimated angle is within ROD_TRIM_GATE_RAD of upright (quasi-static):
  *         trim += ROD_TRIM_RATE * dz(hold, ROD_TRIM_BAND_NM),   |trim| <= ROD_TRIM_MAX_RAD
  *
  * dz is a dead zone: the trim stops once the steady torque is inside the band, not at zero. With
- * backlash the zero-torque point lies inside the gap, where nothing holds the rod's foot and the
- * rod falls to one flank or the other; a small steady torque keeps it resting on one flank
- * instead of hunting across the gap (docs/control.md, "Finding upright").
+ * backlash the zero-torque point lies inside the gap, where nothing holds the rod's foot; the rod rests
+ * on one flank with the small torque that holds it there (0 to 1.2 mN m measured alike, docs/control.md
+ * "Finding upright"). u includes the friction compensation: left out, its mean on a flank goes unseen
+ * and the rod hunts across the gap.
  *
  * ROD_TRIM_RATE [rad per N m per period] makes the trim loop a first-order lag of the design's
  * time constant on the design model (gains/rodgains/trim.py).
@@ -32,7 +33,7 @@ extern "C" {
 
 typedef struct {
     float trim; /* encoder angle of the rod's upright, relative to the encoder's [rad] */
-    float hold; /* low-passed torque the balance commanded, friction compensation apart [N m] */
+    float hold; /* low-passed torque the balance gave, friction compensation included [N m] */
 } rod_trim_t;
 
 /* Power-on: no trim. */
@@ -41,7 +42,8 @@ void rod_trim_init(rod_trim_t *t);
 /* A new balance (the catch): the steady torque is the new balance's; the trim is the rig's and stays. */
 void rod_trim_catch(rod_trim_t *t);
 
-/* One balance period with the torque the rod's model was given; returns the trim [rad]. */
+/* One balance period with the torque the motor was given (friction compensation included: its mean
+ * over the dither on a flank pushes the rod too); returns the trim [rad]. */
 float rod_trim_update(rod_trim_t *t, float torque, bool quasi_static);
 
 #ifdef __cplusplus

@@ -60,14 +60,14 @@ def lean_table(p: Params, backlash=BACKLASH_DEG) -> dict[str, list[float]]:
     return out
 
 
-def figure(p: Params, path: str) -> None:
+def figure(p: Params, path: str, table: dict[str, list[float]] | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     rev = reversal(p)
-    table = lean_table(p)
+    table = table if table is not None else lean_table(p)
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
     a.plot(rev["time"], np.degrees(rev["motor"] - rev["hub"]), label="motor side minus hub")
     a.plot(rev["time"], 1e3 * rev["torque"] / 15.0 * 0.5 * p["gearbox"]["backlash_deg"], lw=0.8, ls="--",
@@ -108,7 +108,7 @@ def main(argv=None) -> int:
     for label, lean in table.items():
         print(f"  {label:40s} " + "  ".join(f"{x:6.2f}" for x in lean))
     if a.figure:
-        figure(p, a.figure)
+        figure(p, a.figure, table)
         print(f"wrote {a.figure}")
     return 0
 

@@ -35,7 +35,9 @@ SETTLE_DEG = 1.0  # the nominal goal band [deg]
 ROBUST_BAND_DEG = 3.0  # every case: every link within this at the end [deg]
 FINAL_WINDOW_S = 0.5  # "at the end": the largest deviation over the last this many seconds [s]
 HELD_WINDOW_S = 4.0  # held_fraction: the share of this last stretch the rod spends within the band [s]
-DEFAULT_SECONDS = {"balance": 6.0, "swingup": 14.0}
+# long enough to see a rod on a rig with play either rest on one flank or hunt across the gap (the first
+# crossing can come 10 s in): shorter runs pass a design that hunts (docs/control.md "Finding upright")
+DEFAULT_SECONDS = {"balance": 20.0, "swingup": 20.0}
 # nominal goals
 BALANCE_SETTLE_GOAL_S = 1.5
 SWINGUP_CATCH_GOAL_S = 5.0
@@ -130,10 +132,9 @@ def _cases() -> dict[str, Case]:
 
 CASES: dict[str, Case] = _cases()
 # (case, task) the default design does not pass, and why (docs/control.md "What the matrix shows").
-# Every other run is expected to pass, but with the gearbox's play the rod rests on one flank and now
-# and then crosses to the other (docs/control.md "Finding upright"): a run that ends during a
-# crossing ends outside the band, so tests/test_robustness_matrix.py holds those to a pass share,
-# not one by one.
+# Every other run is expected to pass, but with the gearbox's play the rod rests on one flank 2 to
+# 2.8 deg off upright (docs/control.md "Finding upright"), near the 3 deg band, so
+# tests/test_robustness_matrix.py holds those to a pass share, not one by one.
 # The rig with an ideal gearbox (no play, no compliance, an exact boot zero, no current lag) and the
 # design tuned for it (no set-point trim, the paper's 30 deg catch): the limit the faithful plant
 # reduces to (tests/test_plant_gearbox.py). Mechanisms that were measured on it (the identified rigs'
@@ -143,23 +144,21 @@ IDEAL_GEARBOX = ('gearbox.model="rigid"', "encoder.zero_error_deg=0.0", "motor.i
                  "gearbox.output_inertia=0.0", "trim.time_constant=0.0", "swing_up.catch_angle_deg=30.0")
 
 _LINEARLY = "the sampled loop is unstable without dry friction on the faithful plant (rodctl gains --report)"
-_PLAY = "the gearbox's play: the rod leans on a flank a wider gap puts further out (docs/control.md)"
 KNOWN_FAILURES: dict[tuple[str, str], str] = {
     **{(c, t): _LINEARLY for c in ("E-15", "rho+15", "E-15,coulomb*0", "rho+15,coulomb*0") for t in TASKS},
     **{("L+3", t): "3 % longer: 0.97 x the clamped buckling length with the gearbox's play; it bends over"
        for t in TASKS},
-    **{(c, t): _PLAY for c in ("backlash2", "backlash3") for t in TASKS},
-    **{("zero-0.5", t): "a boot zero 0.5 deg off: the trim walks it out only slowly across the play "
-       "(4 to 6 deg at the end)" for t in TASKS},
+    **{("backlash2", t): "2 deg of play: the rod still walks toward its flank's lean at 20 s (3.5 deg), and the "
+       "swing-up crosses the gap now and then (docs/control.md)" for t in TASKS},
     **{("curved", t): "a rod curved at rest has no straight upright: its own zero-moment shape leans 6 deg "
        "(docs/plant.md)" for t in TASKS},
-    ("damping*10", "balance"): "ten times the damping slows the 30 deg release: the trim is still walking at the end",
-    ("dist+", "balance"): "the push lands the rod on the other flank 3 s before the end; the trim has not caught up",
 }
 # In-range runs (not KNOWN_FAILURES, rod short of its buckling length) the default design must pass, as
-# a share: the play makes each of them a coin flip near the band (docs/control.md, measured 47 of 59 with
-# the defaults, 31 to 47 with the trim's weights moved 10 %).
-MIN_PASS_SHARE = 0.7
+# a share: with 1 deg of play the rod rests 2 to 2.6 deg off upright, near the 3 deg band (docs/control.md:
+# measured 58 of 64 with the defaults, 57 to 62 with the trim's band and time constant moved 20 %; the
+# fails are the nominal's 1 deg goals, a plant without dry friction, which hunts across the gap, and two
+# swing-ups that end 3.1 and 5.2 deg off).
+MIN_PASS_SHARE = 0.8
 CASE_SETS: dict[str, tuple[str, ...]] = {
     "matrix": tuple(CASES),
     "nominal": ("nominal",),

@@ -138,7 +138,7 @@ class Scenario:
     run: Callable[["Options"], Outcome]
     group: str = "paper"
     # True: must pass; False: a documented failure (docs/control.md says why and what passes instead);
-    # None: measured, not asserted (an in-range matrix case: with the gearbox's play a coin flip near the band)
+    # None: measured, not asserted (an in-range matrix case: with the gearbox's play the rod rests near the band)
     expect_pass: bool | None = True
 
 
