@@ -340,8 +340,7 @@ void rod_control_step(rod_control_t *c, const rod_inputs_t *in, uint32_t heartbe
             drive.torque = 0.0f;
         } else if (c->mode == ROD_MODE_BALANCE) {
             rod_observer_hold(&c->obs, drive.torque - friction);
-            /* the trim reads the whole torque: the compensation follows the estimated rate's sign, and
-             * while the motor dithers on a flank its mean is a steady push on the rod like any other */
+            /* the whole torque, compensation included (rod_trim.h says why) */
             rod_trim_update(&c->trim, drive.torque, quasi_static(c));
         }
     }

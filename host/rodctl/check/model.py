@@ -40,8 +40,7 @@ def _planned(params) -> tuple[float, np.ndarray]:
 def _plan(params) -> tuple[float, np.ndarray]:
     probe = 0.02
     counts = _predict(params, probe)
-    cpr = counts_per_rev(params)
-    peak_deg = float(np.max(np.abs(counts))) * 360.0 / cpr
+    peak_deg = float(np.max(np.abs(counts))) * 360.0 / float(params.counts_per_rev)
     limit = float(params["safety"]["torque_limit"])
     amp = probe * PULSE_PEAK_DEG / peak_deg if peak_deg > 0 else probe
     amp = round(float(np.clip(amp, PULSE_MIN_NM, PULSE_MAX_SHARE * limit)), 4)  # whole 0.1 mN m
@@ -53,8 +52,3 @@ def planned_pulse(params) -> tuple[Experiment, np.ndarray]:
     trace under it, one entry per control period, relative to the first."""
     amp, counts = _planned(params)
     return pulse(amp), counts
-
-
-def counts_per_rev(params) -> float:
-    """Encoder counts per output turn the firmware of these parameters assumes."""
-    return float(params.counts_per_rev)

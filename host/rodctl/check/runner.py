@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from typing import Callable
 
-
 from rodctl.check.results import Report, Result
 from rodctl.check.steps import STEPS, Context
 from rodctl.link.session import hello_settings

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from rodctl.check.model import counts_per_rev, planned_pulse
+from rodctl.check.model import planned_pulse
 from rodctl.check.record import Recording
 from rodctl.check.results import FAIL, PASS, SKIP, Result
 from rodctl.link import protocol as P
@@ -43,7 +43,7 @@ class Context:
         self.user = user
         self.say = say
         self.flash_hint = flash_hint
-        self.design_cpr = counts_per_rev(params)
+        self.design_cpr = float(params.counts_per_rev)  # the design's encoder counts per output turn
         # the board's own (a run-time rig setting, stored with the signs); the design's when it does not say
         self.cpr = hello_counts_per_rev(session.hello) or self.design_cpr
         self.rest: dict | None = None  # the loop step's recording of the rod at rest (the encoder step reads it)
