@@ -14,7 +14,7 @@ from host_tools import run_rodctl
 cv2 = pytest.importorskip("cv2")
 
 FPS = (60, 120, 240)
-SECONDS = {60: 10.0, 120: 6.0, 240: 6.0}  # the clock's drift needs as many swings from fewer frames
+SECONDS = {60: 20.0, 120: 6.0, 240: 6.0}  # at 60 fps the clock's drift needs more swinging (docs/howto/film-a-run.md)
 
 
 @pytest.fixture(scope="module")
@@ -61,15 +61,15 @@ def tracked(filmed):
 
 
 # The drift's floor is the rig's: the encoder sits before a compliant gearbox, and the rod's foot lags it
-# more as the swing grows. On this run the true shaft tangent alone reads 60 ppm off (docs/howto/film-a-run.md).
-DRIFT_PPM = {60: 200.0, 120: 100.0, 240: 100.0}
+# more as the swing grows; at 60 fps that takes 15 s of swinging to average out (docs/howto/film-a-run.md).
+DRIFT_PPM = 100.0
 
 
 @pytest.mark.parametrize("fps", FPS)
 def test_the_clock_is_recovered(filmed, tracked, fps):
     f, a = filmed[fps]["filming"], tracked[fps].alignment
     assert abs(a.offset_s - f.offset_s) <= 1.0 / fps, a  # within one frame
-    assert abs(a.drift_ppm - f.drift_ppm) <= DRIFT_PPM[fps], a
+    assert abs(a.drift_ppm - f.drift_ppm) <= DRIFT_PPM, a
 
 
 @pytest.mark.parametrize("fps", [120, 240])
