@@ -13,7 +13,7 @@
  *
  * dz is a dead zone: the trim stops once the steady torque is inside the band, not at zero. With
  * backlash the zero-torque point lies inside the gap, where nothing holds the rod's foot; the rod rests
- * on one flank with the small torque that holds it there (0 to 1.2 mN m measured alike, docs/control.md
+ * on one flank with the small torque that holds it there (0.25 to 0.75 mN m measured alike, docs/control.md
  * "Finding upright"). u includes the friction compensation: left out, its mean on a flank goes unseen
  * and the rod hunts across the gap.
  *
