@@ -60,8 +60,9 @@ def tracked(filmed):
     return out
 
 
-# The drift's floor is the rig's: the encoder sits before a compliant gearbox, and the rod's foot lags it
-# more as the swing grows; at 60 fps that takes 15 s of swinging to average out (docs/howto/film-a-run.md).
+# The drift is a timing error over the clip's length: the gearbox's play (the rod's foot lags the encoder more
+# as the swing grows) and the camera's base-angle error are each about 1 ms over 10 s, so at 60 fps it takes
+# 15 s of swinging to get within 100 ppm (docs/howto/film-a-run.md).
 DRIFT_PPM = 100.0
 
 
