@@ -159,7 +159,7 @@ def header_text(d: Design, command: str) -> str:
         " *",
         " * Loop (deviation z = x - upright, x = [theta_1..N, rates], theta = pi upright):",
         " *   z_pred = Ad z + Bd (u_prev + w);  e = y - z_pred[0];  z = z_pred + L e;",
-        " *   w = ROD_W_DECAY w + ROD_L_DISTURBANCE e;  u = -K z - w   [N m]",
+        " *   w = ROD_W_DECAY w + ROD_L_DISTURBANCE e;  u = -K z - w - ROD_K_TORQUE_PREV (u_prev + w)   [N m]",
         " */",
         "#ifndef ROD_GAINS_H",
         "#define ROD_GAINS_H",
@@ -177,6 +177,8 @@ def header_text(d: Design, command: str) -> str:
         f"#define ROD_L_INIT {_vector(d.L)}",
         f"#define ROD_L_DISTURBANCE {f32(d.Lw)}  /* gain of the base-torque disturbance estimate w [N m/rad]; u = -K z - w */",
         f"#define ROD_W_DECAY {f32(d.w_decay)}  /* w_pred = this * w per period: a passing torque (1: a random walk) [-] */",
+        f"#define ROD_K_TORQUE_PREV {f32(d.Ku)}  /* gain on the last period's net torque (lqr.r_torque_rate); "
+        "u = -K z - w - this (u_prev + w) [-] */",
         *_imu_tables(d),
         "",
         "#endif /* ROD_GAINS_H */",

@@ -64,7 +64,7 @@ class Design:
     Conventions: state x = [theta_1..theta_N, dtheta_1..dtheta_N] in deviation from upright
     (z = x - x_upright) [rad, rad/s], theta_i the absolute angle of edge i (pi upright); input u =
     base torque at the output shaft [N m]; measurement y = theta_1 - pi [rad] from the encoder.
-    Shapes (n = 2N states): A, Ad (n, n); B, Bd (n, 1); C (1, n); K (1, n) with u = -K z (- w);
+    Shapes (n = 2N states): A, Ad (n, n); B, Bd (n, 1); C (1, n); K (1, n) with u = -K z (- w) (- Ku (u_prev + w));
     L (n, 1), the current-estimate observer gain z = z_pred + L (y - C z_pred); Lw the gain of
     the estimated base-torque disturbance w (0: none).
 
@@ -93,29 +93,41 @@ class Design:
     Lw: float = 0.0  # gain of the estimated base-torque disturbance w [N m/rad]; u = -K z - w
     w_decay: float = 1.0  # w_pred = w_decay w per period [-] (1: a random walk, < 1: a passing torque)
     imu: ImuEstimator | None = None  # the tip IMU's states and gains (sensors.tip_imu); then L, Lw are its encoder column
+    Ku: float = 0.0  # gain on the last period's net torque u_prev + w (lqr.r_torque_rate) [-]; u = -K z - w - Ku (u_prev + w)
 
     @property
     def N(self) -> int:
         return self.rod.N
 
     def observer_matrices(self):
-        """(Ao, Bo, Co, K, L) of the firmware's estimator with the disturbance state w appended:
-        z_pred = Ad z + Bd (u_prev + w), w_pred = w_decay w; u = -K z - w."""
+        """(Ao, Bo, Co, K, L) of the firmware's estimator with the disturbance state w appended, and with
+        Ku the last period's torque u_prev after it: z_pred = Ad z + Bd (u_prev + w), w_pred = w_decay w;
+        u = -K z - w - Ku (u_prev + w)."""
         n = 2 * self.N
-        Ao = np.zeros((n + 1, n + 1))
+        m = n + 1 + (self.Ku != 0.0)
+        Ao = np.zeros((m, m))
         Ao[:n, :n] = self.Ad
-        Ao[:n, n:] = self.Bd
+        Ao[:n, n:n + 1] = self.Bd
         Ao[n, n] = self.w_decay
-        Bo = np.vstack([self.Bd, [[0.0]]])
-        Co = np.hstack([self.C, [[0.0]]])
-        Ko = np.hstack([self.K, [[1.0]]])
-        Lo = np.vstack([self.L, [[self.Lw]]])
+        Bo = np.zeros((m, 1))
+        Bo[:n] = self.Bd
+        Co = np.zeros((1, m))
+        Co[:, :n] = self.C
+        Ko = np.zeros((1, m))
+        Ko[:, :n] = self.K
+        Ko[0, n] = 1.0 + self.Ku
+        Lo = np.zeros((m, 1))
+        Lo[:n] = self.L
+        Lo[n] = self.Lw
+        if self.Ku != 0.0:
+            Bo[n + 1] = 1.0  # the state u_prev is the last command
+            Ko[0, n + 1] = self.Ku
         return Ao, Bo, Co, Ko, Lo
 
     def estimator(self):
-        """(Ao, Bo, Co, K, L) the firmware runs: observer_matrices() with a disturbance state, else the
-        plain design (no w: its eigenvalue 1 would not be part of the loop)."""
-        if self.Lw == 0.0:
+        """(Ao, Bo, Co, K, L) the firmware runs: observer_matrices() with a disturbance state or a torque-rate
+        gain, else the plain design (no w: its eigenvalue 1 would not be part of the loop)."""
+        if self.Lw == 0.0 and self.Ku == 0.0:
             return self.Ad, self.Bd, self.C, self.K, self.L
         return self.observer_matrices()
 
@@ -159,8 +171,9 @@ class Design:
         ols = control.ss(self.Ad, self.Bd, self.C, np.zeros((1, 1)), self.dt, inputs=["torque_Nm"],
                          outputs=["theta_1"], states=names, name="rod_open_loop_sampled")
         Lo, Ko, hats = self.L, self.K, [f"{s}_hat" for s in names]
-        if self.Lw != 0.0:
-            Lo, Ko, hats = np.vstack([self.L, [[self.Lw]]]), np.hstack([self.K, [[1.0]]]), hats + ["w_hat"]
+        if self.Lw != 0.0 or self.Ku != 0.0:
+            _, _, _, Ko, Lo = self.observer_matrices()
+            hats += ["w_hat"] + (["u_prev"] if self.Ku != 0.0 else [])
         A_cl = self.loop()
         B_cl = np.vstack([self.Bd, Lo @ self.C @ self.Bd])
         C_cl = np.block([[self.C, np.zeros((1, len(hats)))], [np.zeros((1, n)), -Ko]])
@@ -214,6 +227,22 @@ def imu_estimator(p: Params, rod: RodModel, A, B, Ad, Bd, Wd, V_enc, w_decay: fl
     Lf, _ = sampled.kalman_current(Af, Cf, W, V)
     im.L, im.Lw, im.La = Lf[:n], Lf[n], Lf[n + 1:]
     return im
+
+
+def torque_rate_lqr(Ad, Bd, Qd, Rd, Nd, rho: float) -> tuple[np.ndarray, float]:
+    """(K, Ku) of the sampled LQR whose cost also weighs the torque's change per period, rho (u_k - u_k-1)^2:
+    u_k = -K z_k - Ku u_k-1. The last torque is a state of the design, so the gain rolls off at the
+    frequencies where a period's change costs more than the error it removes (the encoder's count edges)."""
+    if rho == 0.0:
+        return sampled.dlqr(Ad, Bd, Qd, Rd, Nd)[0], 0.0
+    n = Ad.shape[0]
+    Aa = np.zeros((n + 1, n + 1))
+    Aa[:n, :n] = Ad
+    Ba = np.vstack([Bd, [[1.0]]])
+    Qa = sla.block_diag(Qd, [[rho]])
+    Na = np.vstack([Nd, [[-rho]]])
+    Ka, _ = sampled.dlqr(Aa, Ba, Qa, Rd + rho, Na)
+    return Ka[:, :n], float(Ka[0, n])
 
 
 def design(p: Params, progress=None) -> Design:
@@ -278,15 +307,16 @@ def design(p: Params, progress=None) -> Design:
             V_enc = np.array([[p["observer"]["imu_measurement_noise"]]])
             imu = imu_estimator(p, rod, A, B, Ad, Bd, Wd, V_enc / dt, w_decay)
             L, Lw = imu.L[:, :1], float(imu.Lw[0])
+        Ku = 0.0
         if p["design"]["method"] in ("sampled", "robust"):
-            K, _ = sampled.dlqr(Ad, Bd, Qd, Rd, Nd)
+            K, Ku = torque_rate_lqr(Ad, Bd, Qd, Rd, Nd, p["lqr"]["r_torque_rate"] / dt)
         else:
             K = K_c
     except (np.linalg.LinAlgError, ValueError) as e:
         raise DesignRefused(f"design refused: discrete Riccati equation failed ({e})") from None
 
     d = Design(p, rod, dt, A, B, C, Ad, Bd, K, L, K_c, L_c, p["design"]["method"], checks=checks, Lw=Lw,
-               w_decay=w_decay, imu=imu)
+               w_decay=w_decay, imu=imu, Ku=Ku)
     if d.method == "robust" and imu is not None:
         raise DesignRefused("design refused: design.method = \"robust\" does not refine gains for sensors.tip_imu; "
                             "use \"sampled\"")

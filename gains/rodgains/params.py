@@ -175,6 +175,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         # added to q_angle on the shaft's own angle theta_1: a stiffer base (docs/design.md, "A stiffer shaft")
         "q_shaft_angle": Key(float, "1/rad^2", _nonneg, default=0.0),
         "r_torque": Key(float, "1/(N m)^2", _positive),
+        "r_torque_rate": Key(float, "s^2/(N m)^2", _nonneg, default=0.0),
         "friction_compensation": Key(float, "N m", _nonneg),
     },
     "observer": {
@@ -250,6 +251,10 @@ def _cross_checks(p: dict) -> list[tuple[str, str]]:
         counts_fraction(p)
     except ValueError as e:
         out.append(("encoder.counts_per_motor_rev", str(e)))
+    if p["lqr"]["r_torque_rate"] > 0 and (p["sensors"]["tip_imu"] or p["design"]["method"] != "sampled"
+                                          or p["observer"]["process_noise_torque"] == 0):
+        out.append(("lqr.r_torque_rate", "is built for the base-only \"sampled\" design with a disturbance estimate "
+                    "(observer.process_noise_torque > 0, no sensors.tip_imu): set it to 0 or change those"))
     out += _imu_checks(p)
     out += check_firmware_limits(p)
     return out

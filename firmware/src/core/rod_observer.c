@@ -82,7 +82,7 @@ float rod_observer_step(rod_observer_t *o, const float y[ROD_NY], bool imu_ok)
     predict(o->z, o->u_prev + o->w, zp);
     const float innovation = y[0] - zp[0];
     o->w = fmaf(ROD_L_DISTURBANCE, innovation, ROD_W_DECAY * o->w);
-    float fb = o->w;
+    float fb = fmaf(ROD_K_TORQUE_PREV, o->u_prev + o->w, o->w);
     /* x - x is 0 for every finite x and NaN otherwise, so `check` stays 0 exactly while the
      * whole estimate is finite, without a branch per entry. */
     float check = 0.0f;
@@ -129,7 +129,7 @@ float rod_observer_step(rod_observer_t *o, const float y[ROD_NY], bool imu_ok)
         w = fmaf(LW[r], e[r], w);
     }
     o->w = w;
-    float fb = w;
+    float fb = fmaf(ROD_K_TORQUE_PREV, o->u_prev + w, w);
     float check = 0.0f;
     for (int i = 0; i < ROD_NX; i++) {
         float zi = zp[i];
@@ -155,7 +155,7 @@ float rod_observer_step(rod_observer_t *o, const float y[ROD_NY], bool imu_ok)
 
 float rod_observer_feedback(const rod_observer_t *o)
 {
-    float fb = o->w;
+    float fb = fmaf(ROD_K_TORQUE_PREV, o->u_prev + o->w, o->w);
     for (int i = 0; i < ROD_NX; i++) {
         fb = fmaf(K[i], o->z[i], fb);
     }

@@ -3,7 +3,7 @@
  * Deviation coordinates z = x - x_upright, x = [theta_1..N, rates], measurement
  * y = theta_1 - upright (the set-point trim taken off, rod_trim.h). Each period:
  *     z_pred = Ad z + Bd (u_prev + w);   e = y - z_pred[0];   z = z_pred + L e
- *     w = ROD_W_DECAY w + Lw e;   u = -K z - w
+ *     w = ROD_W_DECAY w + Lw e;   u = -K z - w - ROD_K_TORQUE_PREV (u_prev + w)
  * w is a torque the rod feels at the base beyond the command (the gearbox's dry friction, a
  * torque-constant error, a push), cancelled: a random walk (ROD_W_DECAY 1) or a passing torque,
  * which leaves a steady torque to the trim. The tables come from rod_gains.h (designed for
