@@ -231,8 +231,9 @@ def imu_estimator(p: Params, rod: RodModel, A, B, Ad, Bd, Wd, V_enc, w_decay: fl
 
 def torque_rate_lqr(Ad, Bd, Qd, Rd, Nd, rho: float) -> tuple[np.ndarray, float]:
     """(K, Ku) of the sampled LQR whose cost also weighs the torque's change per period, rho (u_k - u_k-1)^2:
-    u_k = -K z_k - Ku u_k-1. The last torque is a state of the design, so the gain rolls off at the
-    frequencies where a period's change costs more than the error it removes (the encoder's count edges)."""
+    u_k = -K z_k - Ku u_k-1. The last torque is a state of the design so that fast changes of the torque cost
+    something: the buzz once balanced falls, and so does the hold on a much more damped rod's slow mode
+    (docs/control.md "The torque buzz")."""
     if rho == 0.0:
         return sampled.dlqr(Ad, Bd, Qd, Rd, Nd)[0], 0.0
     n = Ad.shape[0]
