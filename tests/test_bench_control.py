@@ -28,17 +28,26 @@ def test_control_goals_are_reported_with_verdicts_and_a_miss_exits_1(monkeypatch
     rows = [{"passed": True, "case": "x", "final_dev_deg": 1.0}] * 70 + \
         [{"passed": False, "case": "backlash3", "final_dev_deg": 4.2}] * 2
     monkeypatch.setattr(M, "run_matrix", lambda p, **kw: rows)
-    monkeypatch.setattr(M, "longest_balanced", lambda p, designs=((),), band_deg=1.0: {"ratio": 1.10})
+    walks = []
+
+    def longest(p, step=0.01, designs=((),), band_deg=1.0):
+        walks.append((p["sensors"]["tip_imu"], p["gearbox"]["backlash_deg"]))
+        return {"ratio": {0: 1.10, 1: 1.0, 2: 1.3}[len(walks) - 1]}
+
+    monkeypatch.setattr(M, "longest_balanced", longest)
     out = tmp_path / "bench.json"
     assert main(["bench", "--only", "control", "--json", str(out)]) == 1  # goals missed
     got = json.loads(out.read_text())
     assert got == {"nominal_balance_settle_s": 0.7, "nominal_balance_final_deg": 0.8, "nominal_swingup_catch_s": 0.93,
                    "nominal_swingup_settle_s": 1.55, "nominal_swingup_final_deg": 0.8, "balanced_torque_rms_mNm": 25.0,
-                   "matrix_runs_passing": 70, "matrix_runs": 72, "backlash3_final_deg": 4.2, "longest_rod_ratio": 1.1}
+                   "matrix_runs_passing": 70, "matrix_runs": 72, "backlash3_final_deg": 4.2, "longest_rod_ratio": 1.1,
+                   "longest_rod_ratio_imu": 1.0, "longest_rod_ratio_imu_no_play": 1.3}
+    assert walks == [(False, 1.0), (True, 1.0), (True, 0.0)]  # base only, then the IMU with and without the play
     lines = {line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line.strip()}
     assert " ok " in lines["nominal_balance_settle_s"] and " ok " in lines["nominal_balance_final_deg"]
     assert "MISSED" in lines["balanced_torque_rms_mNm"] and "(goal <= 20 mN m)" in lines["balanced_torque_rms_mNm"]
     assert "MISSED" in lines["backlash3_final_deg"] and "MISSED" in lines["longest_rod_ratio"]
+    assert "MISSED" in lines["longest_rod_ratio_imu"] and " ok " in lines["longest_rod_ratio_imu_no_play"]
     assert "MISSED" not in lines["matrix_runs_passing"]  # a count, no goal: the play makes it a share
 
 

@@ -20,6 +20,7 @@ from rodgains.rod_model import RodModel
 from rodctl import paths
 from rodctl.link import protocol as P
 from rodctl.sim import convergence
+from rodctl.sim import matrix as M
 from rodctl.sim.imu import ImuConfig, linear_rows
 from rodctl.sim.plant import Plant, faithful_plant, run_closed_loop
 
@@ -208,6 +209,22 @@ def test_with_the_imu_the_estimate_tracks_the_rod_to_a_degree_where_base_only_ca
 
 
 # ---- logs and identify ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("weights,held", [((), False), (M.IMU_LONG_ROD_WEIGHTS, True)],
+                         ids=["stiff shaft (default)", "long-rod weights"])
+def test_with_the_imu_a_rod_1_3_times_its_critical_length_is_held_from_10_deg_without_play(imu_params, weights, held):
+    """Issue 35's long rod, on the faithful plant without the gearbox's play: the estimate sees the bend, and a
+    free shaft with more rate weight lets the base swing the rod back; the default's stiff shaft cannot."""
+    from rodgains.buckling import greenhill_length
+
+    p = imu_params.with_overrides("gearbox.backlash_deg=0", f"rod.length={1.3 * greenhill_length(imu_params)!r}")
+    r = M.run_case(p, M.Case("longest", "longest rod", design_overrides=weights), "balance",
+                   start_deg=M.LONGEST_START_DEG)
+    if held:
+        assert r["fault_reason"] == 0 and r["final_dev_deg"] <= 1.5  # measured 0.96 deg at 20 s
+    else:
+        assert r["fault_reason"] != 0 or r["final_dev_deg"] > 30.0  # falls: the angle limit trips
+
 
 def test_a_log_of_an_imu_board_carries_the_imu_columns(tmp_path):
     import pyarrow.parquet as pq

@@ -1,11 +1,13 @@
 """The faithful-rod control goals of issues 8 and 31, measured (deterministic simulations, not speeds):
 nominal balance and swing-up on the faithful plant (1 deg of gearbox play, the boot zero half a count
 off), the torque once balanced, 3 deg of play, the robustness matrix's pass count, and the longest
-rod balanced from 10 deg as a ratio to the continuum critical length."""
+rod balanced from 10 deg as a ratio to the continuum critical length (base only, and with the tip IMU with and
+without the play)."""
 
 from __future__ import annotations
 
 BALANCED_WINDOW_S = 4.0  # the torque RMS once balanced: the last this many seconds of the nominal swing-up [s]
+IMU_WALK_STEP = 0.02  # the IMU's longest-rod walks step this much of L_crit: the 1.3 goal in half the runs [-]
 
 
 def measure(quick: bool = False) -> dict[str, float]:
@@ -36,4 +38,9 @@ def measure(quick: bool = False) -> dict[str, float]:
         out["backlash3_final_deg"] = round(max(r["final_dev_deg"] for r in wide), 2)
         r = M.longest_balanced(p, designs=M.LONG_ROD_DESIGNS, band_deg=M.ROBUST_BAND_DEG)
         out["longest_rod_ratio"] = r["ratio"] if r["ratio"] is not None else 0.0
+        # issue 35: with the tip IMU, on the faithful plant and on the same plant without the gearbox's play
+        for key, extra in (("longest_rod_ratio_imu", ()), ("longest_rod_ratio_imu_no_play", ("gearbox.backlash_deg=0",))):
+            q = p.with_overrides("sensors.tip_imu=true", *extra)
+            r = M.longest_balanced(q, step=IMU_WALK_STEP, designs=M.IMU_LONG_ROD_DESIGNS, band_deg=M.ROBUST_BAND_DEG)
+            out[key] = r["ratio"] if r["ratio"] is not None else 0.0
     return out

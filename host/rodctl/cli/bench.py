@@ -43,6 +43,8 @@ GOALS = {
     "backlash3_final_deg": (3.0, "<=", "deg", "3 deg of gearbox play: the larger final deviation of the two tasks"),
     "track_720p_frames_per_s": (120.0, ">=", "frames/s", "`rodctl track`'s pass over a 720p video (decode, markers, repeats)"),
     "longest_rod_ratio": (1.3, ">=", "x L_crit", "longest rod held within 3 deg from 10 deg on the faithful plant, design redone per length"),
+    "longest_rod_ratio_imu": (1.3, ">=", "x L_crit", "the same with the tip IMU (issue 35)"),
+    "longest_rod_ratio_imu_no_play": (1.3, ">=", "x L_crit", "the same with the tip IMU and no play in the gearbox"),
 }
 GROUPS = ("gains", "m4", "sil", "host", "robust", "control", "track")
 

@@ -409,6 +409,14 @@ _LONG_ROD_OBSERVERS: tuple[tuple[str, ...], ...] = (
 LONG_ROD_DESIGNS: tuple[tuple[str, ...], ...] = ((),) + _LONG_ROD_OBSERVERS + tuple(
     w + v for w in (SOFT_SHAFT_WEIGHTS, ISSUE8_WEIGHTS) for v in ((),) + _LONG_ROD_OBSERVERS)
 
+# With the tip IMU the estimate sees the bend, and what stops a long rod is the stiff shaft again: the default
+# (q_shaft_angle 325) falls from 1.20 L_crit, and so does the soft shaft at the default rate weight. A free shaft
+# with ~50 x the rate weight lets the base swing the rod back (measured, no play: every length 1.00 to 1.30 within
+# 1.2 deg at 20 s, 1.32 falls; q_rate 0.02 alike, 0.005 falls at 1.30). Not the default: on Table I's rod it is
+# the rod ten times more damped that falls (docs/sensors.md).
+IMU_LONG_ROD_WEIGHTS = ("lqr.q_shaft_angle=0.0", "lqr.q_rate=0.01")
+IMU_LONG_ROD_DESIGNS: tuple[tuple[str, ...], ...] = ((), IMU_LONG_ROD_WEIGHTS)
+
 
 def balances(params: Params, length: float, start_deg: float = LONGEST_START_DEG,
              designs: tuple[tuple[str, ...], ...] = ((),), band_deg: float = SETTLE_DEG) -> tuple[str, ...] | None:
