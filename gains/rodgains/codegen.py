@@ -61,6 +61,9 @@ def pendulum_frequency(p) -> float:
     return max(w, 1e-3)  # no gravity: no pendulum; the firmware divides by it
 
 
+FLANK_RAMP_S = 2.0  # the flank feed-forward comes in this slowly after the catch, so the catch itself is the plain LQR's [s]
+
+
 def _imu_tables(d: Design) -> list[str]:
     """The tip IMU's estimator tables (rodgains.imu.ImuEstimator), none without it."""
     im = d.imu
@@ -81,6 +84,10 @@ def _imu_tables(d: Design) -> list[str]:
         f"#define ROD_IMU_CZ_INIT {_matrix(im.CZ)}",
         f"#define ROD_IMU_CA_INIT {_matrix(im.CA)}",
         f"#define ROD_IMU_DY_INIT {_vector(im.DY)}",
+        f"#define ROD_IMU_FLANK_FF_NM {f32(d.flank_feedforward())}  /* added to the balance torque, ramped in over "
+        f"ROD_IMU_FLANK_RAMP_STEPS: the rod held leaning so that gravity takes {d.params['lqr']['imu_flank_torque'] * 1e3:g} "
+        "mN m at the base (lqr.imu_flank_torque) [N m] */",
+        f"#define ROD_IMU_FLANK_RAMP_STEPS {round(FLANK_RAMP_S / d.dt)}  /* {FLANK_RAMP_S:g} s, slower than the balance */",
     ]
 
 

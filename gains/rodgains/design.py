@@ -124,6 +124,16 @@ class Design:
             Ko[0, n + 1] = self.Ku
         return Ao, Bo, Co, Ko, Lo
 
+    def flank_feedforward(self) -> float:
+        """With the tip IMU: the constant added to u = -K z - w that holds the design model at the lean where
+        gravity takes lqr.imu_flank_torque (tau0) at the base, the gearbox then always on one flank [N m]:
+        the static equilibrium z_ref = -A^-1 B tau0 and u = tau0 - K (z - z_ref); 0 base-only."""
+        if self.imu is None:
+            return 0.0
+        tau0 = self.params["lqr"]["imu_flank_torque"]
+        z_ref = -np.linalg.solve(self.A, self.B) * tau0
+        return float(tau0 - (self.K @ z_ref)[0, 0])
+
     def estimator(self):
         """(Ao, Bo, Co, K, L) the firmware runs: observer_matrices() with a disturbance state or a torque-rate
         gain, else the plain design (no w: its eigenvalue 1 would not be part of the loop)."""

@@ -176,6 +176,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "q_shaft_angle": Key(float, "1/rad^2", _nonneg, default=0.0),
         "r_torque": Key(float, "1/(N m)^2", _positive),
         "r_torque_rate": Key(float, "s^2/(N m)^2", _nonneg, default=0.0),
+        "imu_flank_torque": Key(float, "N m", _between(0.0, 0.01), default=0.001),
         "friction_compensation": Key(float, "N m", _nonneg),
     },
     "observer": {

@@ -43,7 +43,8 @@
 #endif
 #if ROD_NY > 1 && (!defined(ROD_IMU_NA) || !defined(ROD_IMU_L_INIT) || !defined(ROD_IMU_LW_INIT) \
     || !defined(ROD_IMU_LA_INIT) || !defined(ROD_IMU_AZ_INIT) || !defined(ROD_IMU_AA_INIT) || !defined(ROD_IMU_BA_INIT) \
-    || !defined(ROD_IMU_CZ_INIT) || !defined(ROD_IMU_CA_INIT) || !defined(ROD_IMU_DY_INIT))
+    || !defined(ROD_IMU_CZ_INIT) || !defined(ROD_IMU_CA_INIT) || !defined(ROD_IMU_DY_INIT) \
+    || !defined(ROD_IMU_FLANK_FF_NM) || !defined(ROD_IMU_FLANK_RAMP_STEPS))
 #error "rod_gains.h was designed with the tip IMU but lacks its tables: regenerate it with `rodctl gains`"
 #endif
 

@@ -48,6 +48,7 @@ void rod_observer_init(rod_observer_t *o, float y, float rate, float gyro_bias)
     }
     o->a[ROD_OBS_ENCODER_OFFSET] = 0.0f;
     o->a[ROD_OBS_GYRO_BIAS] = gyro_bias;
+    o->steps = 0u;
 #else
     (void)gyro_bias;
 #endif
@@ -149,7 +150,13 @@ float rod_observer_step(rod_observer_t *o, const float y[ROD_NY], bool imu_ok)
         check += ai - ai;
     }
     o->finite = (check == 0.0f) && isfinite(o->w);
-    return -fb;
+    /* An upright rod needs no torque, so the motor would sit in the gearbox's gap and cross it at every
+     * change of sign, and the estimate loses the base at each crossing. Held leaning by a small steady
+     * torque, gravity keeps one flank loaded; the IMU sees the lean, so it is exact (docs/sensors.md). */
+    if (o->steps < ROD_IMU_FLANK_RAMP_STEPS) {
+        o->steps++;
+    }
+    return -fb + ROD_IMU_FLANK_FF_NM * ((float)o->steps / (float)ROD_IMU_FLANK_RAMP_STEPS);
 }
 #endif
 

@@ -19,6 +19,7 @@
 #define ROD_OBSERVER_H
 
 #include <stdbool.h>
+#include <stdint.h>
 
 #include "rod_config.h"
 
@@ -37,6 +38,9 @@ typedef struct {
 #endif
     float w;         /* estimated torque disturbance at the base (dry friction, k_t error) [N m] */
     float u_prev;    /* torque held over the last period [N m] */
+#if ROD_NY > 1
+    uint32_t steps;  /* periods since the catch: the flank feed-forward's ramp */
+#endif
     bool finite;     /* false once any estimate entry is NaN or inf */
 } rod_observer_t;
 

@@ -39,7 +39,9 @@ def measure(quick: bool = False) -> dict[str, float]:
         r = M.longest_balanced(p, designs=M.LONG_ROD_DESIGNS, band_deg=M.ROBUST_BAND_DEG)
         out["longest_rod_ratio"] = r["ratio"] if r["ratio"] is not None else 0.0
         # issue 35: with the tip IMU, on the faithful plant and on the same plant without the gearbox's play
-        for key, extra in (("longest_rod_ratio_imu", ()), ("longest_rod_ratio_imu_no_play", ("gearbox.backlash_deg=0",))):
+        # without play there is no flank to keep loaded: the rod is held upright (docs/sensors.md)
+        no_play = ("gearbox.backlash_deg=0", "lqr.imu_flank_torque=0")
+        for key, extra in (("longest_rod_ratio_imu", ()), ("longest_rod_ratio_imu_no_play", no_play)):
             q = p.with_overrides("sensors.tip_imu=true", *extra)
             r = M.longest_balanced(q, step=IMU_WALK_STEP, designs=M.IMU_LONG_ROD_DESIGNS, band_deg=M.ROBUST_BAND_DEG)
             out[key] = r["ratio"] if r["ratio"] is not None else 0.0
