@@ -255,6 +255,7 @@ def test_json_has_the_design_with_documented_shapes(tmp_path):
     A, B = np.array(j["A"]), np.array(j["B"])
     assert np.allclose(A[:N, N:], np.eye(N))  # state: angles, then their rates
     assert B[N, 0] > 0  # positive torque accelerates theta_1
+    assert j["K_torque_prev"] == 0.0 and j["flank_feedforward_Nm"] == 0.0  # neither without their keys / the IMU
 
 
 def test_report_lists_critical_lengths_margins_and_the_sampled_paper_gain():

@@ -203,6 +203,8 @@ class Design:
             "K": self.K.tolist(),
             "L": self.L.tolist(),
             "L_disturbance": self.Lw,
+            "K_torque_prev": self.Ku,  # u = -K z - w - K_torque_prev (u_prev + w) (lqr.r_torque_rate)
+            "flank_feedforward_Nm": self.flank_feedforward(),  # with the tip IMU: added to u (lqr.imu_flank_torque)
             "observer_form": self.observer_form,
             "method": self.method,
             "K_continuous": self.K_continuous.tolist(),  # lqr(A, B, Q, R) with this file's weights (Sec. III-A)

@@ -14,6 +14,8 @@
  *     a_pred = AZ z + AA a + BA (u_prev + w);  y_hat = CZ z_pred + CA a_pred + DY (u_prev + w_pred)
  *     e = y - y_hat;  z = z_pred + L e;  w = w_pred + Lw e;  a = a_pred + La e
  * The encoder's offset is what finds upright from gravity: the accelerometer sees the tip's lean.
+ * The torque then adds ROD_IMU_FLANK_FF_NM, ramped in over ROD_IMU_FLANK_RAMP_STEPS after the catch:
+ * the rod held leaning so that gravity keeps one flank of the gearbox loaded (lqr.imu_flank_torque).
  */
 #ifndef ROD_OBSERVER_H
 #define ROD_OBSERVER_H
