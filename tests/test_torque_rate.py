@@ -15,7 +15,7 @@ from rodgains.design import design
 
 # the trim and the friction compensation off: the command is then the estimator's alone
 PLAIN = ("lqr.friction_compensation=0", "trim.time_constant=0")
-WEIGHT = "lqr.r_torque_rate=1e-5"  # rolls the gain off above about 50 Hz
+WEIGHT = "lqr.r_torque_rate=1e-5"  # the closed-loop buzz 14.2 mN m RMS against 19.1 (docs/control.md)
 COUNTS = [489, 489, 490, 490, 491, 490, 489, 488, 488, 489, 490, 490, 490, 489, 489, 488, 487, 488, 489, 490] * 3
 
 

@@ -130,7 +130,7 @@ float rod_observer_step(rod_observer_t *o, const float y[ROD_NY], bool imu_ok)
         w = fmaf(LW[r], e[r], w);
     }
     o->w = w;
-    float fb = fmaf(ROD_K_TORQUE_PREV, o->u_prev + w, w);
+    float fb = w; /* no torque-rate term: lqr.r_torque_rate is refused with the IMU (params.py) */
     float check = 0.0f;
     for (int i = 0; i < ROD_NX; i++) {
         float zi = zp[i];
@@ -156,7 +156,7 @@ float rod_observer_step(rod_observer_t *o, const float y[ROD_NY], bool imu_ok)
     if (o->steps < ROD_IMU_FLANK_RAMP_STEPS) {
         o->steps++;
     }
-    return -fb + ROD_IMU_FLANK_FF_NM * ((float)o->steps / (float)ROD_IMU_FLANK_RAMP_STEPS);
+    return -fb + (float)o->steps * (ROD_IMU_FLANK_FF_NM / (float)ROD_IMU_FLANK_RAMP_STEPS);
 }
 #endif
 

@@ -38,8 +38,8 @@ def measure(quick: bool = False) -> dict[str, float]:
         out["backlash3_final_deg"] = round(max(r["final_dev_deg"] for r in wide), 2)
         r = M.longest_balanced(p, designs=M.LONG_ROD_DESIGNS, band_deg=M.ROBUST_BAND_DEG)
         out["longest_rod_ratio"] = r["ratio"] if r["ratio"] is not None else 0.0
-        # issue 35: with the tip IMU, on the faithful plant and on the same plant without the gearbox's play
-        # without play there is no flank to keep loaded: the rod is held upright (docs/sensors.md)
+        # issue 35: with the tip IMU, on the faithful plant and on the same plant without the gearbox's play,
+        # where there is no flank to keep loaded and the rod is held upright (docs/sensors.md)
         no_play = ("gearbox.backlash_deg=0", "lqr.imu_flank_torque=0")
         for key, extra in (("longest_rod_ratio_imu", ()), ("longest_rod_ratio_imu_no_play", no_play)):
             q = p.with_overrides("sensors.tip_imu=true", *extra)
