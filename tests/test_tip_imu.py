@@ -188,6 +188,16 @@ def test_losing_the_imu_while_balancing_trips_fault_imu_within_20_ms(fault, imu_
     assert SilController(imu_sil).lib.rod_sil_reason() == P.Reason.IMU
 
 
+def test_the_gyro_s_range_takes_the_catch_of_an_undamped_rod_without_a_lost_imu_fault(imu_params):
+    """damping x0.1, balance from 30 deg: the catch whips the tip past 2000 dps (a +-2000 dps part's full scale,
+    which the lost-IMU rule would take for a dead part); the default +-4000 dps part reads it and the rod is held."""
+    r = M.run_case(imu_params, M.CASES["damping*0.1"], "balance", keep_log=True)
+    gyro = r["log"]["imu"][:, 0]
+    peak_dps = math.degrees(np.nanmax(np.abs(gyro)))
+    assert 2000.0 < peak_dps < 0.999 * math.degrees(imu_params["sensors"]["gyro_range"])
+    assert r["fault_reason"] == 0 and r["passed"]
+
+
 def test_with_the_imu_the_estimate_tracks_the_rod_to_a_degree_where_base_only_cannot(imu_params, imu_sil):
     """Balance from 10 deg on the faithful plant (1 deg of gearbox play): the estimate's error per edge."""
     from rodctl.build.sil_build import build_sil

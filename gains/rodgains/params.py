@@ -143,7 +143,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "rate_hz": Key(float, "Hz", _between(100, 10000)),
     },
     # An optional 6-axis IMU on the rod near its tip (rodgains/imu.py): it sees the bend the motor's encoder
-    # cannot. Defaults: TDK ICM-42688-P datasheet values at +-2000 dps and +-16 g.
+    # cannot. Defaults: TDK ICM-42686-P at +-4000 dps and +-16 g (the catch whips the tip to 2900 dps); its noise
+    # figures are its sibling ICM-42688-P's datasheet values (docs/sensors.md).
     "sensors": {
         "tip_imu": Key(bool, "-", default=False),
         "imu_mass": Key(float, "kg", _between(0.0, 0.05), default=0.002),
@@ -151,7 +152,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "gyro_noise_density": Key(float, "rad/s/sqrt(Hz)", _positive, default=4.9e-5),
         "accel_noise_density": Key(float, "m/s^2/sqrt(Hz)", _positive, default=6.9e-4),
         "gyro_bias_instability": Key(float, "rad/s", _positive, default=2.4e-5),
-        "gyro_range": Key(float, "rad/s", _positive, default=34.9),
+        "gyro_range": Key(float, "rad/s", _positive, default=69.8),
         "accel_range": Key(float, "m/s^2", _positive, default=156.9),
         "rate_hz": Key(float, "Hz", _between(100, 32000), default=1000.0),
         "latency": Key(float, "s", _between(0.0, 0.01), default=0.001),

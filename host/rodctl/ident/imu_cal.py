@@ -20,7 +20,7 @@ import numpy as np
 G = 9.80665
 GRAVITY_TOLERANCE = 0.1  # |accel| hanging within 10 % of g, or the part or its scale is wrong [-]
 TILT_LIMIT_DEG = 10.0  # beyond this the part is mounted across the rod, not tilted on it
-BIAS_LIMIT_RAD_S = 0.0175  # 1 dps: the ICM-42688-P's zero-rate output is +-0.5 dps
+BIAS_LIMIT_RAD_S = 0.0175  # 1 dps: twice the ICM-42688-P's +-0.5 dps zero-rate output (the default part's sibling)
 STILL_RMS_RAD_S = 0.02  # the gyro's spread at rest above this: the rod was moving, or the part is noisy
 
 

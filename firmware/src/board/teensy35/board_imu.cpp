@@ -1,8 +1,10 @@
-// board_imu.cpp -- ICM-42688-P over SPI0 with an asynchronous (DMA) transfer; see board_imu.h.
+// board_imu.cpp -- ICM-42686-P over SPI0 with an asynchronous (DMA) transfer; see board_imu.h.
 //
-// Registers (ICM-42688-P datasheet DS-000347, bank 0): DEVICE_CONFIG 0x11 (bit 0 soft reset),
+// Registers (bank 0, the ICM-42688-P's map, DS-000347): DEVICE_CONFIG 0x11 (bit 0 soft reset),
 // ACCEL_DATA_X1 0x1F .. GYRO_DATA_Z0 0x2A (big-endian int16, accel then gyro), PWR_MGMT0 0x4E,
-// GYRO_CONFIG0 0x4F, ACCEL_CONFIG0 0x50, WHO_AM_I 0x75 = 0x47; bit 7 of the address reads.
+// GYRO_CONFIG0 0x4F, ACCEL_CONFIG0 0x50, WHO_AM_I 0x75; bit 7 of the address reads. The 42686-P answers
+// 0x44 and its full-scale codes start one step higher: gyro FS_SEL 0 = +-4000 dps, accel FS_SEL 1 = +-16 g
+// (Linux inv_icm42600: inv_icm42686_gyro_fs, inv_icm42686_accel_fs).
 // SPI API: PaulStoffregen/SPI (SPIClass::transfer(tx, rx, count, EventResponderRef) under
 // SPI_HAS_TRANSFER_ASYNC) and cores/teensy3/EventResponder.h (attachImmediate).
 #include "board_imu.h"
@@ -14,12 +16,12 @@
 #if ROD_NY > 1
 
 static const uint8_t REG_DEVICE_CONFIG = 0x11, REG_ACCEL_X1 = 0x1F, REG_PWR_MGMT0 = 0x4E;
-static const uint8_t REG_GYRO_CONFIG0 = 0x4F, REG_ACCEL_CONFIG0 = 0x50, REG_WHO_AM_I = 0x75, WHO_AM_I = 0x47;
+static const uint8_t REG_GYRO_CONFIG0 = 0x4F, REG_ACCEL_CONFIG0 = 0x50, REG_WHO_AM_I = 0x75, WHO_AM_I = 0x44;
 static const uint8_t READ = 0x80;
-static const uint8_t GYRO_2000DPS_1KHZ = 0x06;   // FS_SEL 000, ODR 0110
-static const uint8_t ACCEL_16G_1KHZ = 0x06;      // FS_SEL 000, ODR 0110
+static const uint8_t GYRO_4000DPS_1KHZ = 0x06;   // FS_SEL 000, ODR 0110
+static const uint8_t ACCEL_16G_1KHZ = 0x26;      // FS_SEL 001, ODR 0110
 static const uint8_t GYRO_ACCEL_LOW_NOISE = 0x0F;
-static const float GYRO_RAD_S_PER_LSB = 3.14159265f / 180.0f / 16.4f;  // +-2000 dps: 16.4 LSB/dps
+static const float GYRO_RAD_S_PER_LSB = 3.14159265f / 180.0f / 8.2f;   // +-4000 dps: 8.2 LSB/dps
 static const float ACCEL_M_S2_PER_LSB = 9.80665f / 2048.0f;           // +-16 g: 2048 LSB/g
 static const size_t FRAME = 13;  // address, then 6 accel and 6 gyro bytes
 
@@ -75,7 +77,7 @@ bool board_imu_begin(void)
     if (read_reg(REG_WHO_AM_I) != WHO_AM_I) {
         return false;
     }
-    write_reg(REG_GYRO_CONFIG0, GYRO_2000DPS_1KHZ);
+    write_reg(REG_GYRO_CONFIG0, GYRO_4000DPS_1KHZ);
     write_reg(REG_ACCEL_CONFIG0, ACCEL_16G_1KHZ);
     write_reg(REG_PWR_MGMT0, GYRO_ACCEL_LOW_NOISE);
     delay(50);  // the gyro starts within 30 ms of PWR_MGMT0

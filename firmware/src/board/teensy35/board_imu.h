@@ -1,4 +1,4 @@
-// board_imu.h -- the tip IMU (TDK ICM-42688-P on SPI0): set-up, and a read pipelined across periods.
+// board_imu.h -- the tip IMU (TDK ICM-42686-P on SPI0): set-up, and a read pipelined across periods.
 //
 // Each control step takes the sample whose DMA transfer the previous step started, and then
 // starts the next one (board_imu_start): the SPI transfer (13 bytes at 8 MHz, ~15 us) runs during

@@ -16,7 +16,7 @@
 #define BOARD_PIN_NFAULT 8  // PTD3, open drain from the driver: INPUT_PULLUP, low = fault
 #define BOARD_PIN_LED 13    // PTC5, on-board LED
 
-// Tip IMU (ICM-42688-P), SPI0; used only by a firmware designed with sensors.tip_imu. SCK moves to
+// Tip IMU (ICM-42686-P), SPI0; used only by a firmware designed with sensors.tip_imu. SCK moves to
 // its alternate pin 14 (PTD1) because 13 is the LED.
 #define BOARD_PIN_IMU_CS 10    // PTC4, GPIO chip select
 #define BOARD_PIN_IMU_MOSI 11  // PTC6 = SPI0_SOUT
