@@ -271,6 +271,21 @@ def test_report_lists_critical_lengths_margins_and_the_sampled_paper_gain():
     assert "UNSTABLE" in line and "sampled spectral radius 20.1" in line
 
 
+def test_report_gives_each_case_s_slow_mode_and_a_growing_one_where_the_loop_is_unstable():
+    """The base-only design on the faithful plant, linearized: Table I's rod has its least damped slow mode
+    well damped; E -15 % and rho +15 % are unstable without dry friction, and their slow mode grows."""
+    from rodctl.sim.linear_check import SLOW_HZ, corner_radii, report_lines
+
+    d = design(load_params())
+    rows = {c.name: c for c in corner_radii(d)}
+    nominal = rows["nominal"]
+    assert 0.5 < nominal.slow_hz < SLOW_HZ and nominal.slow_zeta > 0.3
+    for name in ("E-15", "rho+15"):
+        assert rows[name].radius > 1.0 and rows[name].slow_zeta < 0.0
+    line = [x for x in report_lines(d) if x.strip().startswith("nominal ")][0]
+    assert f"slow mode {nominal.slow_hz:5.2f} Hz, damping {nominal.slow_zeta:5.2f}" in line
+
+
 def test_report_points_a_rod_past_the_critical_length_to_the_soft_shaft():
     """The stiff shaft clamps the rod's foot: past 1.05 x the critical length the report says so (the default
     design holds 1.05 from 10 deg, not 1.06; docs/scenarios.md, longest rod). Table I's rod (1.006 x) gets no note."""

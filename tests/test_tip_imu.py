@@ -108,9 +108,10 @@ def test_with_the_imu_every_matrix_case_short_of_buckling_is_linearly_stable_wit
     from rodctl.sim.linear_check import corner_radii
 
     rows = corner_radii(imu_design)
-    unstable = [(name, rho, ratio) for name, rho, ratio in rows if rho > 1.0]
-    assert all(ratio >= 1.0 for _, _, ratio in unstable), unstable  # only what buckles clamped may fall
-    assert {n: r for n, r, _ in rows}["E-15"] < 1.0 and {n: r for n, r, _ in rows}["rho+15"] < 1.0
+    unstable = [c for c in rows if c.radius > 1.0]
+    assert all(c.ratio >= 1.0 for c in unstable), unstable  # only what buckles clamped may fall
+    radius = {c.name: c.radius for c in rows}
+    assert radius["E-15"] < 1.0 and radius["rho+15"] < 1.0
 
 
 def test_the_header_carries_the_imu_tables_and_compiles_for_the_m4f(imu_design, tmp_path):

@@ -12,6 +12,9 @@ starts, swing-up or the gap (the matrix runs those).
 
 from __future__ import annotations
 
+import math
+from typing import NamedTuple
+
 import numpy as np
 
 from rodgains import sampled
@@ -29,6 +32,9 @@ LINEAR_CASES = ("E+15", "E-15", "rho+15", "rho-15", "damping*0.1", "damping*10",
 # The DER's stretching modes carry no damping (the rod's damping acts on bending rates): they sit on
 # the unit circle, so radii within this of 1 are marginal, not unstable.
 MARGINAL = 1e-6
+# The rod's slow modes, where the loop's bend and lean live: the tip IMU's near-buckling rods hunt with the
+# gearbox's play at 0.4 to 0.6 Hz (docs/sensors.md); the encoder's ringing above it is report.least_damped_mode's.
+SLOW_HZ = 5.0
 CORNERS = (("E+15", "rho-15"), ("E+15", "rho+15"), ("E-15", "rho-15"), ("E-15", "rho+15"))
 
 
@@ -67,25 +73,55 @@ def linear_plant(plant_p, imu: bool = False):
     return (A, B, C, *extra)
 
 
-def loop_radius(d: Design, plant_p, delay_periods: int = 0, actuator_gain: float = 1.0) -> float:
-    """Spectral radius of the sampled loop: faithful plant of plant_p (linear_plant) with d's estimator
-    and LQR."""
+def loop_matrix(d: Design, plant_p, delay_periods: int = 0, actuator_gain: float = 1.0) -> np.ndarray:
+    """The sampled loop's state matrix: faithful plant of plant_p (linear_plant) with d's estimator and LQR."""
     if d.imu is not None:
         A, B, C, Ci, Di = linear_plant(plant_p, imu=True)
         Ad, Bd = sampled.zoh(A, B, d.dt)
-        return _radius(d.imu_loop(actuator_gain, Ad, Bd, delay_periods, C_imu=Ci, D_imu=Di, C_enc=C))
+        return d.imu_loop(actuator_gain, Ad, Bd, delay_periods, C_imu=Ci, D_imu=Di, C_enc=C)
     A, B, C = linear_plant(plant_p)
     Ad, Bd = sampled.zoh(A, B, d.dt)
     Ao, Bo, Co, Ko, Lo = d.estimator()
-    return _radius(sampled.closed_loop(Ad, Bd, C, Ko, Lo, Ad_obs=Ao, Bd_obs=Bo, actuator_gain=actuator_gain, C_obs=Co,
-                                       delay=delay_periods))
+    return sampled.closed_loop(Ad, Bd, C, Ko, Lo, Ad_obs=Ao, Bd_obs=Bo, actuator_gain=actuator_gain, C_obs=Co,
+                               delay=delay_periods)
 
 
-def corner_radii(d: Design) -> list[tuple[str, float, float]]:
-    """(name, spectral radius, clamped buckling ratio of its rod) for the nominal faithful plant, each
-    linear case of the matrix and the E x rho corners."""
+def loop_radius(d: Design, plant_p, delay_periods: int = 0, actuator_gain: float = 1.0) -> float:
+    """Spectral radius of the sampled loop (loop_matrix), the DER's undamped stretching modes left out."""
+    return _radius(loop_matrix(d, plant_p, delay_periods, actuator_gain))
+
+
+def slow_mode(M: np.ndarray, dt: float) -> tuple[float, float]:
+    """(frequency [Hz], damping ratio [-]) of the least damped oscillation below SLOW_HZ of the sampled loop M
+    (period dt [s]); (nan, nan) when none oscillates there."""
+    z = np.linalg.eigvals(M)
+    z = z[(np.abs(np.abs(z) - 1.0) > MARGINAL) & (np.abs(z) > 1e-12) & (z.imag > 0)]
+    s = np.log(z) / dt
+    s = s[s.imag < 2 * np.pi * SLOW_HZ]
+    if not s.size:
+        return math.nan, math.nan
+    zeta = -s.real / np.abs(s)
+    k = int(np.argmin(zeta))
+    return float(s[k].imag / (2 * np.pi)), float(zeta[k])
+
+
+class Corner(NamedTuple):
+    name: str
+    radius: float  # spectral radius of the sampled loop [-]
+    ratio: float  # the case's rod above the hub over its clamped buckling length [-]
+    slow_hz: float  # the least damped oscillation below SLOW_HZ [Hz] (slow_mode)
+    slow_zeta: float  # ... and its damping ratio [-]
+
+
+def corner_radii(d: Design) -> list[Corner]:
+    """The loop on the nominal faithful plant, each linear case of the matrix and the E x rho corners."""
     p = d.params
-    out = [("nominal", loop_radius(d, p), clamped_ratio(p))]
+
+    def corner(name, plant_p, ratio_p, delay=0, gain=1.0):
+        M = loop_matrix(d, plant_p, delay, gain)
+        return Corner(name, _radius(M), clamped_ratio(ratio_p), *slow_mode(M, d.dt))
+
+    out = [corner("nominal", p, p)]
     for name in LINEAR_CASES:
         case = matrix.CASES[name]
         gain = 1.0
@@ -93,12 +129,11 @@ def corner_radii(d: Design) -> list[tuple[str, float, float]]:
         if name.startswith("kt"):  # the design's torque-to-current conversion is off by this factor
             gain = float(overrides[0].split("*=")[1])
             overrides = []
-        q = matrix.apply_overrides(p, overrides)
-        out.append((name, loop_radius(d, q, delay_periods=case.delay_periods, actuator_gain=gain),
-                    clamped_ratio(matrix.apply_overrides(p, case.plant_overrides))))
+        out.append(corner(name, matrix.apply_overrides(p, overrides), matrix.apply_overrides(p, case.plant_overrides),
+                          case.delay_periods, gain))
     for a, b in CORNERS:
         q = matrix.apply_overrides(p, matrix.CASES[a].plant_overrides + matrix.CASES[b].plant_overrides)
-        out.append((f"{a} & {b}", loop_radius(d, q), clamped_ratio(q)))
+        out.append(corner(f"{a} & {b}", q, q))
     return out
 
 
@@ -122,17 +157,21 @@ def report_lines(d: Design) -> list[str]:
         f"period {1e3 * per_design:.1f} ms ({100 * (per_design - per_lim) / per_lim:+.1f} % from the plant's limit)",
         "Sampled loop on the faithful plant (linearized upright, no dry friction, the gearbox's teeth in contact,",
         "the winding's current lag) at the matrix's corners (largest |z| off the unit circle: the DER's",
-        "stretching modes are undamped and sit on it); L/Lc: the rod above the hub over its clamped buckling length:",
+        "stretching modes are undamped and sit on it); slow mode: the least damped oscillation below "
+        f"{SLOW_HZ:g} Hz, where play",
+        "and dry friction turn a lightly damped bend into hunting; L/Lc: the rod above the hub over its clamped "
+        "buckling length:",
     ]
     unstable, in_range = [], []
-    for name, rho, ratio in corner_radii(d):
+    for name, rho, ratio, hz, zeta in corner_radii(d):
         past = ratio >= 1.0
         if rho > 1.0:
             flag = "  <- unstable: past its buckling length" if past else "  <- WARNING: unstable (> 1)"
             (unstable if past else in_range).append(name)
         else:
             flag = "  (past its buckling length)" if past else ""
-        lines.append(f"  {name:22s} spectral radius {rho:.6f}  L/Lc {ratio:.3f}{flag}")
+        slow = f"slow mode {hz:5.2f} Hz, damping {zeta:5.2f}" if math.isfinite(hz) else f"{'no slow oscillation':30s}"
+        lines.append(f"  {name:22s} spectral radius {rho:.6f}  {slow}  L/Lc {ratio:.3f}{flag}")
     if in_range:
         lines.append(f"  WARNING: the design does not hold {', '.join(in_range)} even linearly, and nothing dry may")
     elif unstable:
