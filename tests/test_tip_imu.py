@@ -127,13 +127,29 @@ def test_the_header_carries_the_imu_tables_and_compiles_for_the_m4f(imu_design, 
                             f"-I{paths.CORE_SRC}", "-c", str(src), "-o", str(tmp_path / "x.o")],
                            capture_output=True, text=True)
         assert r.returncode == 0, (src.name, r.stderr)
+    r = _compile_board_imu(tmp_path)
+    assert r.returncode == 0, r.stderr
+
+
+def _compile_board_imu(include_dir: Path) -> subprocess.CompletedProcess:
+    """The IMU's board driver built for the M4F against the Teensy stub and the rod_gains.h in include_dir."""
     board = paths.FIRMWARE / "src" / "board" / "teensy35"
     stub = Path(__file__).parent / "c" / "teensy_stub"
-    r = subprocess.run(["arm-none-eabi-g++", "-std=gnu++14", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror",
-                        "-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-O2", "-fno-exceptions",
-                        "-fno-rtti", f"-I{stub}", f"-I{tmp_path}", f"-I{paths.CORE_SRC}", "-c",
-                        str(board / "board_imu.cpp"), "-o", str(tmp_path / "b.o")], capture_output=True, text=True)
-    assert r.returncode == 0, r.stderr
+    return subprocess.run(["arm-none-eabi-g++", "-std=gnu++14", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror",
+                           "-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-O2",
+                           "-fno-exceptions", "-fno-rtti", f"-I{stub}", f"-I{include_dir}", f"-I{paths.CORE_SRC}", "-c",
+                           str(board / "board_imu.cpp"), "-o", str(include_dir / "b.o")], capture_output=True, text=True)
+
+
+def test_a_header_designed_for_another_gyro_range_does_not_build_the_imu_driver(tmp_path):
+    """The driver reads the part at +-4000 dps; a header for +-2000 dps (sensors.gyro_range = 34.9, a parameter file
+    from before the part changed) would have the core call every reading past 2000 dps clipped."""
+    from rodgains.codegen import header_text
+
+    old_range = load_params(overrides=IMU + ["sensors.gyro_range=34.9"])
+    (tmp_path / "rod_gains.h").write_text(header_text(design(old_range), "test"))
+    r = _compile_board_imu(tmp_path)
+    assert r.returncode != 0 and "sensors.gyro_range must be this part's full scale, 69.8 rad/s" in r.stderr
 
 
 # ---- the simulated part ---------------------------------------------------------------------------

@@ -143,7 +143,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "rate_hz": Key(float, "Hz", _between(100, 10000)),
     },
     # An optional 6-axis IMU on the rod near its tip (rodgains/imu.py): it sees the bend the motor's encoder
-    # cannot. Defaults: TDK ICM-42686-P at +-4000 dps and +-16 g (the catch whips the tip to 2900 dps); its noise
+    # cannot. Defaults: TDK ICM-42686-P at +-4000 dps and +-16 g (the catch whips the tip to about 3,000 dps); its noise
     # figures are its sibling ICM-42688-P's datasheet values (docs/sensors.md).
     "sensors": {
         "tip_imu": Key(bool, "-", default=False),

@@ -75,7 +75,7 @@ def calibrate(still: dict, turn: dict | None = None) -> ImuCalibration:
     elif abs(tilt) > TILT_LIMIT_DEG:
         p.append(f"the part is tilted {tilt:+.1f} deg on the rod (more than {TILT_LIMIT_DEG:g}): mount it along the rod")
     if abs(bias) > BIAS_LIMIT_RAD_S:
-        p.append(f"gyro bias {math.degrees(bias):+.2f} dps is beyond the part's 1 dps: was the rod still?")
+        p.append(f"gyro bias {math.degrees(bias):+.2f} dps is beyond 1 dps, twice the part family's zero-rate output: was the rod still?")
     if noise > STILL_RMS_RAD_S:
         p.append(f"the gyro moved {noise * 1e3:.1f} mrad/s RMS at rest: let the rod hang still and run again")
     if turn is not None:

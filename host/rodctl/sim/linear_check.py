@@ -1,5 +1,5 @@
 """The design against the faithful plant, linearized: model order vs convergence, and the sampled loop's
-spectral radius at the robustness matrix's parameter corners (`rodctl gains --report`).
+spectral radius and least damped slow mode at the robustness matrix's parameter corners (`rodctl gains --report`).
 
 A linear check only: the plant is linearized about its upright equilibrium (the DER compressed by
 its weight), without Coulomb friction, current limit or quantization, with its gearbox (the motor
@@ -38,9 +38,10 @@ SLOW_HZ = 5.0
 CORNERS = (("E+15", "rho-15"), ("E+15", "rho+15"), ("E-15", "rho-15"), ("E-15", "rho+15"))
 
 
-def _radius(M: np.ndarray) -> float:
-    """Largest |eigenvalue| off the unit circle (the DER's undamped stretching modes sit on it)."""
-    mag = np.abs(np.linalg.eigvals(M))
+def _radius(M: np.ndarray, z: np.ndarray | None = None) -> float:
+    """Largest |eigenvalue| off the unit circle (the DER's undamped stretching modes sit on it); z: M's
+    eigenvalues when already at hand."""
+    mag = np.abs(np.linalg.eigvals(M) if z is None else z)
     off = mag[np.abs(mag - 1.0) > MARGINAL]
     return float(off.max()) if off.size else 1.0
 
@@ -91,11 +92,11 @@ def loop_radius(d: Design, plant_p, delay_periods: int = 0, actuator_gain: float
     return _radius(loop_matrix(d, plant_p, delay_periods, actuator_gain))
 
 
-def slow_mode(M: np.ndarray, dt: float) -> tuple[float, float]:
-    """(frequency [Hz], damping ratio [-]) of the least damped oscillation below SLOW_HZ of the sampled loop M
-    (period dt [s]); (nan, nan) when none oscillates there."""
-    z = np.linalg.eigvals(M)
-    z = z[(np.abs(np.abs(z) - 1.0) > MARGINAL) & (np.abs(z) > 1e-12) & (z.imag > 0)]
+def slow_mode(z: np.ndarray, dt: float) -> tuple[float, float]:
+    """(frequency [Hz], damping ratio [-]) of the least damped oscillation below SLOW_HZ among a sampled loop's
+    eigenvalues z (period dt [s]); (nan, nan) when none oscillates there. A divergence that does not oscillate
+    (a real z > 1) shows in the spectral radius, not here."""
+    z = z[(np.abs(np.abs(z) - 1.0) > MARGINAL) & (z.imag > 0)]
     s = np.log(z) / dt
     s = s[s.imag < 2 * np.pi * SLOW_HZ]
     if not s.size:
@@ -117,9 +118,10 @@ def corner_radii(d: Design) -> list[Corner]:
     """The loop on the nominal faithful plant, each linear case of the matrix and the E x rho corners."""
     p = d.params
 
-    def corner(name, plant_p, ratio_p, delay=0, gain=1.0):
-        M = loop_matrix(d, plant_p, delay, gain)
-        return Corner(name, _radius(M), clamped_ratio(ratio_p), *slow_mode(M, d.dt))
+    def corner(name, plant_p, ratio_p, delay_periods=0, actuator_gain=1.0):
+        M = loop_matrix(d, plant_p, delay_periods, actuator_gain)
+        z = np.linalg.eigvals(M)
+        return Corner(name, _radius(M, z), clamped_ratio(ratio_p), *slow_mode(z, d.dt))
 
     out = [corner("nominal", p, p)]
     for name in LINEAR_CASES:
@@ -170,7 +172,7 @@ def report_lines(d: Design) -> list[str]:
             (unstable if past else in_range).append(name)
         else:
             flag = "  (past its buckling length)" if past else ""
-        slow = f"slow mode {hz:5.2f} Hz, damping {zeta:5.2f}" if math.isfinite(hz) else f"{'no slow oscillation':30s}"
+        slow = f"slow mode {hz:5.2f} Hz, damping {zeta:5.2f}" if math.isfinite(hz) else f"{'no slow oscillation':33s}"
         lines.append(f"  {name:22s} spectral radius {rho:.6f}  {slow}  L/Lc {ratio:.3f}{flag}")
     if in_range:
         lines.append(f"  WARNING: the design does not hold {', '.join(in_range)} even linearly, and nothing dry may")

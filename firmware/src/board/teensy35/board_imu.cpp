@@ -18,11 +18,21 @@
 static const uint8_t REG_DEVICE_CONFIG = 0x11, REG_ACCEL_X1 = 0x1F, REG_PWR_MGMT0 = 0x4E;
 static const uint8_t REG_GYRO_CONFIG0 = 0x4F, REG_ACCEL_CONFIG0 = 0x50, REG_WHO_AM_I = 0x75, WHO_AM_I = 0x44;
 static const uint8_t READ = 0x80;
+// The catch whips the tip to ~3,000 dps (docs/sensors.md): the 42686-P's widest gyro range, FS_SEL 0
+// (+-2000 dps on the 42688-P). Its FS_SEL 0 accelerometer range is +-32 g; FS_SEL 1 keeps +-16 g's resolution.
 static const uint8_t GYRO_4000DPS_1KHZ = 0x06;   // FS_SEL 000, ODR 0110
 static const uint8_t ACCEL_16G_1KHZ = 0x26;      // FS_SEL 001, ODR 0110
 static const uint8_t GYRO_ACCEL_LOW_NOISE = 0x0F;
-static const float GYRO_RAD_S_PER_LSB = 3.14159265f / 180.0f / 8.2f;   // +-4000 dps: 8.2 LSB/dps
-static const float ACCEL_M_S2_PER_LSB = 9.80665f / 2048.0f;           // +-16 g: 2048 LSB/g
+static constexpr float GYRO_RAD_S_PER_LSB = 3.14159265f / 180.0f / 8.2f;   // +-4000 dps: 8.2 LSB/dps
+static constexpr float ACCEL_M_S2_PER_LSB = 9.80665f / 2048.0f;           // +-16 g: 2048 LSB/g
+// The core calls a reading past 0.999 of the header's full scale clipped (rod_imu.c): a header designed for a
+// wider range would pass clipped readings as good, one for a narrower range call good ones clipped.
+static_assert(ROD_IMU_GYRO_RANGE_RAD_S > 0.99f * 32768.0f * GYRO_RAD_S_PER_LSB
+                  && ROD_IMU_GYRO_RANGE_RAD_S < 1.001f * 32768.0f * GYRO_RAD_S_PER_LSB,
+              "sensors.gyro_range must be this part's full scale, 69.8 rad/s (+-4000 dps)");
+static_assert(ROD_IMU_ACCEL_RANGE_M_S2 > 0.99f * 32768.0f * ACCEL_M_S2_PER_LSB
+                  && ROD_IMU_ACCEL_RANGE_M_S2 < 1.001f * 32768.0f * ACCEL_M_S2_PER_LSB,
+              "sensors.accel_range must be this part's full scale, 156.9 m/s^2 (+-16 g)");
 static const size_t FRAME = 13;  // address, then 6 accel and 6 gyro bytes
 
 static const SPISettings settings(BOARD_IMU_SPI_HZ, MSBFIRST, SPI_MODE0);
