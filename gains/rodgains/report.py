@@ -62,16 +62,22 @@ def one_period_delay_radius(d: Design) -> float:
 RINGING_DAMPING_RATIO = 0.1
 
 
-def least_damped_mode(d: Design) -> tuple[float, float]:
-    """(frequency [Hz], damping ratio [-]) of the least damped oscillatory mode of the sampled loop
-    on the design model (plant + observer + LQR), s = ln(z) / dt."""
-    z = np.linalg.eigvals(d.loop())
-    s = np.log(z[z.imag > 1e-12].astype(complex)) / d.dt
+def least_damped(z: np.ndarray, dt: float, below_hz: float = np.inf) -> tuple[float, float] | None:
+    """(frequency [Hz], damping ratio [-]) of the least damped oscillation below below_hz among a sampled loop's
+    eigenvalues z (period dt [s]), s = ln(z) / dt; None when none oscillates there."""
+    s = np.log(z[z.imag > 1e-12].astype(complex)) / dt
+    s = s[s.imag < 2 * np.pi * below_hz]
     if s.size == 0:
-        return float("nan"), 1.0
+        return None
     zeta = -s.real / np.abs(s)
     k = int(np.argmin(zeta))
-    return float(abs(s[k].imag) / (2 * np.pi)), float(zeta[k])
+    return float(s[k].imag / (2 * np.pi)), float(zeta[k])
+
+
+def least_damped_mode(d: Design) -> tuple[float, float]:
+    """(frequency [Hz], damping ratio [-]) of the least damped oscillatory mode of the sampled loop
+    on the design model (plant + observer + LQR); (nan, 1) when none oscillates."""
+    return least_damped(np.linalg.eigvals(d.loop()), d.dt) or (float("nan"), 1.0)
 
 
 def quantization_torque(d: Design) -> float:

@@ -75,6 +75,13 @@ static inline void predict(const float *z, float u, float *zp)
     }
 }
 
+/* The torque beside -K z: the disturbance w, and the torque-rate gain on the last net torque
+ * (u = -K z - w - ROD_K_TORQUE_PREV (u_prev + w)). */
+static inline float w_and_rate_terms(const rod_observer_t *o)
+{
+    return fmaf(ROD_K_TORQUE_PREV, o->u_prev + o->w, o->w);
+}
+
 #if ROD_NY == 1
 float rod_observer_step(rod_observer_t *o, const float y[ROD_NY], bool imu_ok)
 {
@@ -83,7 +90,7 @@ float rod_observer_step(rod_observer_t *o, const float y[ROD_NY], bool imu_ok)
     predict(o->z, o->u_prev + o->w, zp);
     const float innovation = y[0] - zp[0];
     o->w = fmaf(ROD_L_DISTURBANCE, innovation, ROD_W_DECAY * o->w);
-    float fb = fmaf(ROD_K_TORQUE_PREV, o->u_prev + o->w, o->w);
+    float fb = w_and_rate_terms(o);
     /* x - x is 0 for every finite x and NaN otherwise, so `check` stays 0 exactly while the
      * whole estimate is finite, without a branch per entry. */
     float check = 0.0f;
@@ -162,7 +169,7 @@ float rod_observer_step(rod_observer_t *o, const float y[ROD_NY], bool imu_ok)
 
 float rod_observer_feedback(const rod_observer_t *o)
 {
-    float fb = fmaf(ROD_K_TORQUE_PREV, o->u_prev + o->w, o->w);
+    float fb = w_and_rate_terms(o);
     for (int i = 0; i < ROD_NX; i++) {
         fb = fmaf(K[i], o->z[i], fb);
     }

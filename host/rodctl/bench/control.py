@@ -30,19 +30,21 @@ def measure(quick: bool = False) -> dict[str, float]:
         "nominal_swingup_final_deg": round(swing["final_dev_deg"], 2),
         "balanced_torque_rms_mNm": round(1e3 * float(np.sqrt(np.mean(log["torque"][late] ** 2))), 1),
     }
-    if not quick:  # the whole matrix (78 runs), 3 deg of play and the longest-rod walk: about a minute
+    if not quick:  # the whole matrix (78 runs), 3 deg of play and the three longest-rod walks: a few minutes
         rows = M.run_matrix(p)
         out["matrix_runs_passing"] = sum(1 for r in rows if r["passed"])
         out["matrix_runs"] = len(rows)
         wide = [r for r in rows if r["case"] == "backlash3"]
         out["backlash3_final_deg"] = round(max(r["final_dev_deg"] for r in wide), 2)
-        r = M.longest_balanced(p, designs=M.LONG_ROD_DESIGNS, band_deg=M.ROBUST_BAND_DEG)
-        out["longest_rod_ratio"] = r["ratio"] if r["ratio"] is not None else 0.0
         # issue 35: with the tip IMU, on the faithful plant and on the same plant without the gearbox's play,
         # where there is no flank to keep loaded and the rod is held upright (docs/sensors.md)
-        no_play = ("gearbox.backlash_deg=0", "lqr.imu_flank_torque=0")
-        for key, extra in (("longest_rod_ratio_imu", ()), ("longest_rod_ratio_imu_no_play", no_play)):
-            q = p.with_overrides("sensors.tip_imu=true", *extra)
-            r = M.longest_balanced(q, step=IMU_WALK_STEP, designs=M.IMU_LONG_ROD_DESIGNS, band_deg=M.ROBUST_BAND_DEG)
+        imu = p.with_overrides("sensors.tip_imu=true")
+        imu_walk = {"step": IMU_WALK_STEP, "designs": M.IMU_LONG_ROD_DESIGNS}
+        walks = (("longest_rod_ratio", p, {"designs": M.LONG_ROD_DESIGNS}),
+                 ("longest_rod_ratio_imu", imu, imu_walk),
+                 ("longest_rod_ratio_imu_no_play", imu.with_overrides("gearbox.backlash_deg=0", "lqr.imu_flank_torque=0"),
+                  imu_walk))
+        for key, q, how in walks:
+            r = M.longest_balanced(q, band_deg=M.ROBUST_BAND_DEG, **how)
             out[key] = r["ratio"] if r["ratio"] is not None else 0.0
     return out

@@ -20,6 +20,7 @@ import numpy as np
 from rodgains import sampled
 from rodgains.buckling import clamped_ratio
 from rodgains.design import Design
+from rodgains.report import least_damped
 from rodgains.trim import trim_gains
 
 from rodctl.sim import convergence, matrix
@@ -38,10 +39,9 @@ SLOW_HZ = 5.0
 CORNERS = (("E+15", "rho-15"), ("E+15", "rho+15"), ("E-15", "rho-15"), ("E-15", "rho+15"))
 
 
-def _radius(M: np.ndarray, z: np.ndarray | None = None) -> float:
-    """Largest |eigenvalue| off the unit circle (the DER's undamped stretching modes sit on it); z: M's
-    eigenvalues when already at hand."""
-    mag = np.abs(np.linalg.eigvals(M) if z is None else z)
+def _radius(z: np.ndarray) -> float:
+    """Largest |z| among a loop's eigenvalues z off the unit circle (the DER's undamped stretching modes sit on it)."""
+    mag = np.abs(z)
     off = mag[np.abs(mag - 1.0) > MARGINAL]
     return float(off.max()) if off.size else 1.0
 
@@ -89,21 +89,14 @@ def loop_matrix(d: Design, plant_p, delay_periods: int = 0, actuator_gain: float
 
 def loop_radius(d: Design, plant_p, delay_periods: int = 0, actuator_gain: float = 1.0) -> float:
     """Spectral radius of the sampled loop (loop_matrix), the DER's undamped stretching modes left out."""
-    return _radius(loop_matrix(d, plant_p, delay_periods, actuator_gain))
+    return _radius(np.linalg.eigvals(loop_matrix(d, plant_p, delay_periods, actuator_gain)))
 
 
 def slow_mode(z: np.ndarray, dt: float) -> tuple[float, float]:
     """(frequency [Hz], damping ratio [-]) of the least damped oscillation below SLOW_HZ among a sampled loop's
     eigenvalues z (period dt [s]); (nan, nan) when none oscillates there. A divergence that does not oscillate
     (a real z > 1) shows in the spectral radius, not here."""
-    z = z[(np.abs(np.abs(z) - 1.0) > MARGINAL) & (z.imag > 0)]
-    s = np.log(z) / dt
-    s = s[s.imag < 2 * np.pi * SLOW_HZ]
-    if not s.size:
-        return math.nan, math.nan
-    zeta = -s.real / np.abs(s)
-    k = int(np.argmin(zeta))
-    return float(s[k].imag / (2 * np.pi)), float(zeta[k])
+    return least_damped(z[np.abs(np.abs(z) - 1.0) > MARGINAL], dt, SLOW_HZ) or (math.nan, math.nan)
 
 
 class Corner(NamedTuple):
@@ -119,9 +112,8 @@ def corner_radii(d: Design) -> list[Corner]:
     p = d.params
 
     def corner(name, plant_p, ratio_p, delay_periods=0, actuator_gain=1.0):
-        M = loop_matrix(d, plant_p, delay_periods, actuator_gain)
-        z = np.linalg.eigvals(M)
-        return Corner(name, _radius(M, z), clamped_ratio(ratio_p), *slow_mode(z, d.dt))
+        z = np.linalg.eigvals(loop_matrix(d, plant_p, delay_periods, actuator_gain))
+        return Corner(name, _radius(z), clamped_ratio(ratio_p), *slow_mode(z, d.dt))
 
     out = [corner("nominal", p, p)]
     for name in LINEAR_CASES:
