@@ -45,6 +45,9 @@ GOALS = {
     "longest_rod_ratio": (1.3, ">=", "x L_crit", "longest rod held within 3 deg from 10 deg on the faithful plant, design redone per length"),
     "longest_rod_ratio_imu": (1.3, ">=", "x L_crit", "the same with the tip IMU (issue 35)"),
     "longest_rod_ratio_imu_no_play": (1.3, ">=", "x L_crit", "the same with the tip IMU, no play in the gearbox, held upright"),
+    "imu_own_design_e_minus15_final_deg": (3.0, "<=", "deg", "Young's modulus -15 % (0.99 x L_crit), the tip IMU and a design "
+                                           "for that rod: the larger final deviation of the two tasks"),
+    "imu_own_design_rho_plus15_final_deg": (3.0, "<=", "deg", "the same for density +15 %"),
 }
 GROUPS = ("gains", "m4", "sil", "host", "robust", "control", "track")
 
@@ -128,11 +131,12 @@ def run_bench(args) -> int:
             print(f"measuring {g} ...", file=sys.stderr, flush=True)
             results.update(measure({g}, quick=args.quick))
     missed = []
+    width = max(len(k) for k in results) if results else 0
     for key, value in results.items():
         goal, op, unit, what = GOALS[key]
         v = verdict(key, value)
         target = f"(goal {op} {goal:g} {unit})" if goal is not None else ""
-        print(f"{key:28s} {value:>12,.6g} {unit:9s} {target:24s} {v:6s} {what}")
+        print(f"{key:{width}s} {value:>12,.6g} {unit:9s} {target:24s} {v:6s} {what}")
         if v == "MISSED":
             missed.append(key)
     if args.json:

@@ -19,7 +19,7 @@ the nominal case is held to the stricter goals of issue 8 (`criterion(task, stri
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Callable
 
 import numpy as np
@@ -163,6 +163,15 @@ CASE_SETS: dict[str, tuple[str, ...]] = {
     "quick": ("nominal", "E-15", "delay+1", "inext10"),
     "plants": tuple(n for n in CASES if n.startswith(("inext", "der"))),
 }
+
+
+def own_design(case: Case) -> Case:
+    """The case with a design that knows its rod: the plant's overrides made in the design too, what a design
+    from `rodctl identify`'s file is (it measures Young's modulus within 0.8 %, docs/identification.md; the
+    density is weighed). The matrix itself judges the file's own design on every case (docs/sensors.md,
+    "A design for the rod's own modulus")."""
+    return replace(case, name=f"{case.name} (own design)", title=f"{case.title}, the design made for it",
+                   design_overrides=case.plant_overrides + case.design_overrides)
 
 
 def cases_for(task: str, names=None) -> list[Case]:
