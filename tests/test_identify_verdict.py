@@ -59,6 +59,20 @@ def test_a_rod_past_its_buckling_length_is_told_so_first():
     assert "clamped buckling length" in first and "shorter or stiffer rod" in first
 
 
+@pytest.mark.parametrize("imu", [False, True])
+def test_a_rod_near_its_buckling_length_without_the_imu_is_pointed_to_it(imu):
+    """Rig B of tests/test_identify.py: 0.983 x its clamped buckling length, where base-only feedback holds 20 of
+    78 matrix runs and the tip IMU 51 (docs/sensors.md)."""
+    p = load_params().with_overrides("rod.youngs_modulus=520000.0", f"sensors.tip_imu={str(imu).lower()}")
+    v = V.from_rows([row("nominal", "balance", False, final=30.0), row("nominal", "swingup", False, final=40.0)],
+                    p, "nominal")
+    assert 0.97 < v.buckling_ratio < 1.0
+    hint = [ln for ln in v.lines("f.toml") if "sensors.tip_imu = true" in ln]
+    assert len(hint) == (0 if imu else 1)
+    if not imu:
+        assert hint[0].startswith("  next: the rod is 0.983 x its clamped buckling length") and "within about 2 %" in hint[0]
+
+
 @pytest.mark.parametrize("cases", ["none", "nominal"])
 def test_none_still_judges_the_nominal_goals(cases, monkeypatch):
     seen = []

@@ -23,6 +23,10 @@ from rodgains.params import Params
 # The gearbox play above which the play, not the weights, is the first thing to name when a nominal
 # goal is missed: at 0.5 deg the default rod already ends 2 to 3 deg off upright (docs/control.md) [deg].
 PLAY_FIRST_DEG = 0.3
+# A rod this near its clamped buckling length (and short of it), without the tip IMU, is told about the IMU:
+# there the encoder barely sees the slow bend, and the IMU with a design for the rod holds what base-only cannot
+# (docs/sensors.md: rig B at 0.983 x, 20 of 78 runs base-only, 51 with the IMU; E -15 % at 0.994 x held) [-].
+NEAR_BUCKLING = 0.97
 
 
 @dataclass(frozen=True)
@@ -36,6 +40,7 @@ class Verdict:
     buckling_ratio: float  # the rod above the hub over its clamped buckling length [-]
     backlash_deg: float  # the identified gearbox play (0: a rigid gearbox) [deg]
     encoder_on_motor: bool
+    tip_imu: bool  # the design reads the tip IMU (sensors.tip_imu)
     failed: tuple[str, ...]  # "case/task" of every in-range run that failed
 
     @property
@@ -83,6 +88,11 @@ class Verdict:
                          "encoder and the rod, which leans on a flank the encoder cannot see: measure the rod side "
                          "(an encoder on the output shaft, encoder.location = \"output\"), or a gearbox with less "
                          "play (docs/control.md)")
+        if not self.ready and NEAR_BUCKLING <= self.buckling_ratio < 1.0 and not self.tip_imu:
+            steps.append(f"the rod is {self.buckling_ratio:.3f} x its clamped buckling length, where the motor's "
+                         "encoder barely sees its slow bend: a tip IMU (sensors.tip_imu = true) sees it, and this "
+                         "near buckling the design needs the rod's modulus within about 2 %, as identified "
+                         "(docs/sensors.md)")
         if not self.ready:
             steps.append(f"see which runs fail and how: rodctl robustness --params {out}")
             steps.append(f"search the weights for this rig: rodctl tune --params {out} --out tuned.toml")
@@ -126,7 +136,8 @@ def from_rows(rows: list[dict], params: Params, cases: str) -> Verdict:
                    in_range_passed=len(in_range) - len(failed), in_range_runs=len(in_range), nominal=nominal,
                    buckling_ratio=clamped_ratio(params),
                    backlash_deg=gear["backlash_deg"] if gear["model"] == "compliant" else 0.0,
-                   encoder_on_motor=params["encoder"]["location"] == "motor", failed=failed)
+                   encoder_on_motor=params["encoder"]["location"] == "motor", tip_imu=params["sensors"]["tip_imu"],
+                   failed=failed)
 
 
 def judge(params: Params, cases: str = "matrix", *, runner=None, jobs: int | None = None,
