@@ -98,6 +98,14 @@ def test_failed_usb_writes_count_as_dropped_and_cost_only_their_frames(harness):
     assert last.frames_dropped == 3  # and the board says so
 
 
+def test_from_reset_the_driver_is_held_off_before_setup_runs(harness):
+    """The core's startup takes ~300 ms (clocks, USB) before setup(): the board's early hook drives nEN high and
+    the PWM pin low first, and leaves the watchdog as the core's own hook does (off, reconfigurable)."""
+    _, _, out = run_board(harness, seconds=0.1)
+    assert out["early_driver_off"] == "1"
+    assert out["early_wdog_stctrlh"] == "16"  # WDOG_STCTRLH_ALLOWUPDATE
+
+
 def test_watchdog_is_refreshed_at_its_pace(harness):
     """LPO clock undivided, first refresh not before 5 ms, then at least 10 ms apart, and kept up."""
     _, _, out = run_board(harness, seconds=1.0)

@@ -68,8 +68,26 @@ extern volatile uint16_t stub_reg16[64];
 #define PORT_PCR_PE (uint32_t)0x00000002
 #define PORT_PCR_PS (uint32_t)0x00000001
 
+// the driver's pins as board_failsafe.cpp drives them before the core's startup (nEN pin 7 = PTD2, PWM pin 5 =
+// PTD7; kinetis.h / core_pins.h names)
+#define SIM_SCGC5 STUB_REG32(0x40048038u)
+#define SIM_SCGC5_PORTA (uint32_t)0x00000200
+#define SIM_SCGC5_PORTB (uint32_t)0x00000400
+#define SIM_SCGC5_PORTC (uint32_t)0x00000800
+#define SIM_SCGC5_PORTD (uint32_t)0x00001000
+#define SIM_SCGC5_PORTE (uint32_t)0x00002000
+#define CORE_PIN5_BITMASK (1 << 7)
+#define CORE_PIN5_PORTCLEAR STUB_REG32(0x400FF0C8u)
+#define CORE_PIN5_DDRREG STUB_REG32(0x400FF0D4u)
+#define CORE_PIN5_CONFIG STUB_REG32(0x4004C01Cu)
+#define CORE_PIN7_BITMASK (1 << 2)
+#define CORE_PIN7_PORTSET STUB_REG32(0x400FF0C4u)
+#define CORE_PIN7_DDRREG STUB_REG32(0x400FF0D4u)
+#define CORE_PIN7_CONFIG STUB_REG32(0x4004C008u)
+
 #define WDOG_STCTRLH STUB_REG16(0x40052000u)
 #define WDOG_STCTRLH_WDOGEN (uint16_t)0x0001
+#define WDOG_STCTRLH_ALLOWUPDATE (uint16_t)0x0010
 #define WDOG_TOVALH STUB_REG16(0x40052004u)
 #define WDOG_TOVALL STUB_REG16(0x40052006u)
 #define WDOG_UNLOCK STUB_REG16(0x4005200Eu)

@@ -103,6 +103,9 @@ size_t usb_serial_class::write(const uint8_t *buffer, size_t size)
 
 void setup();
 void loop();
+extern "C" void startup_early_hook(void);
+static bool early_driver_off;
+static unsigned early_wdog;
 
 int main(int argc, char **argv)
 {
@@ -118,6 +121,13 @@ int main(int argc, char **argv)
             host_bytes.push_back((uint8_t)v);
         }
     }
+    // the core's ResetHandler calls the board's early hook before anything else (board_failsafe.cpp)
+    startup_early_hook();
+    early_driver_off = (CORE_PIN7_PORTSET & CORE_PIN7_BITMASK) && (CORE_PIN7_DDRREG & CORE_PIN7_BITMASK)
+                         && CORE_PIN7_CONFIG == PORT_PCR_MUX(1) && (CORE_PIN5_PORTCLEAR & CORE_PIN5_BITMASK)
+                         && (CORE_PIN5_DDRREG & CORE_PIN5_BITMASK) && CORE_PIN5_CONFIG == PORT_PCR_MUX(1)
+                         && (SIM_SCGC5 & SIM_SCGC5_PORTD);
+    early_wdog = WDOG_STCTRLH;
     pins[7] = HIGH;  // nEN's pull-up
     setup();
     uint64_t next_isr = now_us + 1000u;
@@ -137,8 +147,9 @@ int main(int argc, char **argv)
     for (uint8_t b : out_bytes) {
         printf("%02x", b);
     }
-    printf("\nnen_low_ever=%d\nled_toggles=%u\nwdog_presc=%u\nwdog_stctrlh=%u\nrefresh_ms=", nen_low_ever ? 1 : 0,
-           led_toggles, (unsigned)WDOG_PRESC, (unsigned)WDOG_STCTRLH);
+    printf("\nnen_low_ever=%d\nled_toggles=%u\nwdog_presc=%u\nwdog_stctrlh=%u\nearly_driver_off=%d\n"
+           "early_wdog_stctrlh=%u\nrefresh_ms=", nen_low_ever ? 1 : 0, led_toggles, (unsigned)WDOG_PRESC,
+           (unsigned)WDOG_STCTRLH, early_driver_off ? 1 : 0, early_wdog);
     for (size_t i = 0; i < refresh_ms.size(); i++) {
         printf(i ? ",%llu" : "%llu", (unsigned long long)refresh_ms[i]);
     }

@@ -23,7 +23,7 @@ static const uint8_t READ = 0x80;
 static const uint8_t GYRO_4000DPS_1KHZ = 0x06;   // FS_SEL 000, ODR 0110
 static const uint8_t ACCEL_16G_1KHZ = 0x26;      // FS_SEL 001, ODR 0110
 static const uint8_t GYRO_ACCEL_LOW_NOISE = 0x0F;
-static constexpr float GYRO_RAD_S_PER_LSB = 3.14159265f / 180.0f / 8.2f;   // +-4000 dps: 8.2 LSB/dps
+static constexpr float GYRO_RAD_S_PER_LSB = 3.14159265f / 180.0f / 8.192f;  // +-4000 dps: 32768 / 4000 LSB/dps
 static constexpr float ACCEL_M_S2_PER_LSB = 9.80665f / 2048.0f;           // +-16 g: 2048 LSB/g
 // The core calls a reading past 0.999 of the header's full scale clipped (rod_imu.c): a header designed for a
 // wider range would pass clipped readings as good, one for a narrower range call good ones clipped.
@@ -92,8 +92,16 @@ bool board_imu_begin(void)
     write_reg(REG_PWR_MGMT0, GYRO_ACCEL_LOW_NOISE);
     delay(50);  // the gyro starts within 30 ms of PWR_MGMT0
     done_event.attachImmediate(transfer_done);
+    // The SPI library allocates its DMA channels (operator new) on the first asynchronous transfer:
+    // make that one here, before the control interrupt runs, and wait for it.
     alive = true;
-    return true;
+    board_imu_start();
+    const uint32_t t0 = millis();
+    while (busy && millis() - t0 < 10u) {
+    }
+    alive = !busy;
+    done = false;
+    return alive;
 }
 
 void board_imu_take(rod_imu_reading_t *out)

@@ -209,6 +209,7 @@ static void fallback_step()
     in.encoder_count = board_quadrature_count();
     in.last_step_us = 0;
     in.driver_fault = digitalReadFast(BOARD_PIN_NFAULT) == LOW;
+    board_imu_take(&in.imu);  // none: nothing starts a transfer without the timer
     rod_outputs_t out;
     rod_device_step(&device, &in, &out);
     digitalWriteFast(BOARD_PIN_NEN, HIGH);
