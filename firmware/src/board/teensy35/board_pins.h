@@ -23,6 +23,7 @@
 #define BOARD_PIN_IMU_MISO 12  // PTC7 = SPI0_SIN
 #define BOARD_PIN_IMU_SCK 14   // PTD1 = SPI0_SCK (alternate)
 #define BOARD_IMU_SPI_HZ 8000000u  // the part takes 24 MHz; 8 MHz keeps the flex cable to the tip clean
+                                   // (SPISettings rounds down to a bus divider: 7.5 MHz at F_BUS 60 MHz)
 // The part's axes (0 x, 1 y, 2 z) and signs that give the rod's frame (rod_io.h): x along the rod
 // toward the tip, y toward increasing theta, gyro z = d theta / dt. As mounted on the flex with the
 // part's x toward the tip and its z out of the swing plane toward the viewer; `rodctl identify
