@@ -132,13 +132,12 @@ def test_the_header_carries_the_imu_tables_and_compiles_for_the_m4f(imu_design, 
 
 
 def _compile_board_imu(include_dir: Path) -> subprocess.CompletedProcess:
-    """The IMU's board driver built for the M4F against the Teensy stub and the rod_gains.h in include_dir."""
-    board = paths.FIRMWARE / "src" / "board" / "teensy35"
-    stub = Path(__file__).parent / "c" / "teensy_stub"
-    return subprocess.run(["arm-none-eabi-g++", "-std=gnu++14", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror",
-                           "-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-O2",
-                           "-fno-exceptions", "-fno-rtti", f"-I{stub}", f"-I{include_dir}", f"-I{paths.CORE_SRC}", "-c",
-                           str(board / "board_imu.cpp"), "-o", str(include_dir / "b.o")], capture_output=True, text=True)
+    """The IMU's board driver built for the M4F against the Teensy stub and the rod_gains.h in include_dir, with the
+    flags every board source is built with (test_board_layer.py)."""
+    from test_board_layer import ARM, BOARD, STUB, WARN
+
+    return subprocess.run(["arm-none-eabi-g++", *WARN, *ARM, f"-I{STUB}", f"-I{include_dir}", f"-I{paths.CORE_SRC}", "-c",
+                           str(BOARD / "board_imu.cpp"), "-o", str(include_dir / "b.o")], capture_output=True, text=True)
 
 
 def test_a_header_designed_for_another_gyro_range_does_not_build_the_imu_driver(tmp_path):
