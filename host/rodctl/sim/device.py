@@ -296,7 +296,11 @@ class RealTimeRunner:
     """
 
     BATCH_S = 0.002  # wake-up interval: a few steps per batch at 1 kHz
-    MAX_CATCH_UP_S = 1.0  # later than this (e.g. the process was stopped): skip ahead instead
+    # Later than this (a loaded machine starved the thread, or the process was stopped): skip ahead instead.
+    # A stall's backlog runs in one burst with only the host bytes that were waiting before it, so a burst
+    # longer than the board's heartbeat timeout (0.5 s) would fault HEARTBEAT while the host kept sending;
+    # a fifth of it keeps the virtual board's heartbeat what the host's own pace makes it [s].
+    MAX_CATCH_UP_S = 0.1
 
     def __init__(self, device: VirtualDevice, *, take_input: Callable[[], bytes], deliver: Callable[[bytes], None],
                  backlog: Callable[[], int] = lambda: 0, max_backlog: int = 65536,
