@@ -157,8 +157,10 @@ def test_the_written_file_carries_the_stiffer_shaft_and_says_why(monkeypatch, tm
     assert load_params(out)["lqr"]["friction_compensation"] == pytest.approx(1.5 * 0.005)
 
 
-def test_no_dry_friction_leaves_nothing_to_choose():
-    assert C.choose(load_params(None, ["motor.coulomb_friction=0.0"]), cases="nominal", jobs=1, progress=False) is None
+def test_no_dry_friction_writes_no_compensation():
+    choice = C.choose(load_params(None, ["motor.coulomb_friction=0.0"]), cases="nominal", jobs=1, progress=False)
+    assert choice.params["lqr"]["friction_compensation"] == 0.0
+    assert choice.comment_lines() == ["rodctl identify: no dry friction identified: no compensation, nothing to cancel"]
 
 
 # Random rig s4_1 of docs/identification.md (J x0.80, b x1.22,

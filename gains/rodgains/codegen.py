@@ -144,7 +144,8 @@ def header_text(d: Design, command: str) -> str:
         ("ROD_TRIM_RATE", f32(trim.rate),
          f"set-point trim per N m beyond the band, per period [rad/(N m)]: {p['trim']['time_constant']:g} s on the "
          f"design model (G = {trim.torque_per_offset:.4g} N m/rad)"),
-        ("ROD_TRIM_BAND_NM", f32(trim.band), "steady torque the trim leaves alone [N m]"),
+        ("ROD_TRIM_BAND_NM", f32(trim.band),
+         "steady torque the trim leaves alone [N m]: trim.flank_hold - motor.coulomb_friction, within trim.band to band_max"),
         ("ROD_TRIM_GATE_RAD", f32(trim.gate), "trims only with every estimated angle within this of upright [rad]"),
         ("ROD_TRIM_MAX_RAD", f32(trim.limit), "|trim| ceiling [rad]"),
         ("ROD_NY", str(3 if d.imu is not None else 1),

@@ -198,6 +198,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "trim": {
         "time_constant": Key(float, "s", _between(0.0, 100.0), default=2.0),
         "band": Key(float, "N m", _between(0.0, 0.05), default=0.001),
+        "flank_hold": Key(float, "N m", _between(0.0, 0.05), default=0.003),
+        "band_max": Key(float, "N m", _between(0.0, 0.05), default=0.0015),
         "hold_time_constant": Key(float, "s", _between(0.001, 10.0), default=0.2),
         "gate_deg": Key(float, "deg", _between(0.1, 30.0), default=3.0),
         "limit_deg": Key(float, "deg", _between(0.0, 30.0), default=5.0),

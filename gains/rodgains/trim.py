@@ -38,14 +38,25 @@ def static_torque_per_offset(d) -> float:
     return float(-(Ko @ steady[n:])[0, 0])
 
 
+def band_nm(params) -> float:
+    """The steady torque the trim leaves alone [N m]: what keeps the rod's foot on one flank of the gearbox's
+    play once the trim has walked the torque down. The motor side's dry friction holds the foot there too, so
+    the band is the rest of trim.flank_hold, within trim.band (its floor) and trim.band_max (its ceiling: each
+    mN m leans the tip about 1.3 deg). Measured on the robustness matrix (docs/control.md, "The band follows
+    the rig's dry friction"): with Table I's 5 mN m the 0.5 mN m floor; with none, a 0.5 mN m band lets the
+    rod hunt across the gap (22 of 78 runs pass) and 1.5 mN m holds it (56)."""
+    t, coulomb = params["trim"], params["motor"]["coulomb_friction"]
+    return max(t["band"], min(t["flank_hold"] - coulomb, t["band_max"]))
+
+
 def trim_gains(d) -> TrimGains:
     """rod_trim's gains for a Design (its params' [trim] table); rate 0 when the trim is off."""
     t = d.params["trim"]
     if d.imu is not None:  # the estimator finds upright from the IMU's gravity: nothing for the trim to seek
-        return TrimGains(hold_k=1.0 - math.exp(-d.dt / t["hold_time_constant"]), rate=0.0, band=t["band"],
+        return TrimGains(hold_k=1.0 - math.exp(-d.dt / t["hold_time_constant"]), rate=0.0, band=band_nm(d.params),
                          gate=math.radians(t["gate_deg"]), limit=math.radians(t["limit_deg"]), torque_per_offset=0.0)
     G = static_torque_per_offset(d)
     on = t["time_constant"] > 0 and abs(G) > 1e-9
     return TrimGains(hold_k=1.0 - math.exp(-d.dt / t["hold_time_constant"]),
-                     rate=d.dt / (G * t["time_constant"]) if on else 0.0, band=t["band"],
+                     rate=d.dt / (G * t["time_constant"]) if on else 0.0, band=band_nm(d.params),
                      gate=math.radians(t["gate_deg"]), limit=math.radians(t["limit_deg"]), torque_per_offset=G)

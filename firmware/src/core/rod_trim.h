@@ -13,8 +13,9 @@
  *
  * dz is a dead zone: the trim stops once the steady torque is inside the band, not at zero. With
  * backlash the zero-torque point lies inside the gap, where nothing holds the rod's foot; the rod rests
- * on one flank with the small torque that holds it there (0.25 to 0.75 mN m measured alike, docs/control.md
- * "Finding upright"). u includes the friction compensation: left out, its mean on a flank goes unseen
+ * on one flank with the small torque that holds it there (0.25 to 0.75 mN m measured alike on Table I's 5 mN m of
+ * dry friction, docs/control.md "Finding upright"). The motor's dry friction holds the foot there too, so with
+ * less of it the band is wider (gains/rodgains/trim.py band_nm). u includes the friction compensation: left out, its mean on a flank goes unseen
  * and the rod hunts across the gap.
  *
  * ROD_TRIM_RATE [rad per N m per period] makes the trim loop a first-order lag of the design's

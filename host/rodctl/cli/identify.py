@@ -324,14 +324,15 @@ def _choose_compensation(args, identified):
 
     if args.compensation_cases == "none":
         return None
+    if identified["motor"]["coulomb_friction"] < C.MIN_COULOMB_NM:
+        choice = C.without_friction(identified, args.compensation_cases)
+        print(f"friction compensation: 0 mN m ({choice.note})")
+        return choice
     print(f"friction compensation: {', '.join(f'{r:g}' for r in C.RATIOS)} x the identified Coulomb friction and "
           f"the nominal file's {1e3 * identified['lqr']['friction_compensation']:.2f} mN m, each judged by the "
           f"robustness matrix ({args.compensation_cases}) on the identified rig", file=sys.stderr, flush=True)
     choice = C.choose(identified, cases=args.compensation_cases, jobs=args.jobs,
                       say=lambda line: print(f"friction compensation: {line}", file=sys.stderr, flush=True))
-    if choice is None:
-        print("friction compensation: no Coulomb friction identified; kept the nominal file's", file=sys.stderr)
-        return None
     for c in choice.candidates:
         print(f"  {c.line()}", file=sys.stderr)
     print(f"friction compensation: {1e3 * choice.best.torque_nm:.2f} mN m ({choice.best.ratio:.3g} x)"
