@@ -126,3 +126,187 @@ def test_a_unit_slip_is_refused_with_the_reading_that_fits(override, line, tmp_p
     r = run_rodctl("gains", "--set", override, "--header", str(tmp_path / "h.h"))
     assert r.returncode == 2 and r.stderr.strip() == line
     assert not (tmp_path / "h.h").exists()
+
+
+# --- output paths: checked before any work, one line naming the option, exit 2, nothing written ----------
+
+# {f}: a regular file, so {f}/x cannot be written by anyone (root included: root ignores permission bits,
+# but not a file where a folder should be); {tmp}/nod: a folder that does not exist.
+OUTPUT_CASES = [
+    (["check", "--port", "sim://", "--yes", "--json", "{f}/c.json"], "--json"),
+    (["identify", "--port", "sim://", "--yes", "--out", "{f}/a.toml"], "--out"),
+    (["identify", "--port", "sim://", "--yes", "--out", "{tmp}/a.toml", "--plot", "{tmp}/a.xyz"], "--plot"),
+    (["identify", "{tmp}/run.csv", "--out", "{tmp}/a.toml", "--plot", "{tmp}/nod/a.png"], "--plot"),
+    (["robustness", "--samples", "0", "--cases", "quick", "--json", "{f}/r.json"], "--json"),
+    (["robustness", "--samples", "0", "--cases", "quick", "--json", "", "--plot", "{tmp}/r.xyz"], "--plot"),
+    (["sweep", "--grid", "rod.length=0.15", "--out", "{f}/a.parquet"], "--out"),
+    (["sweep", "--grid", "rod.length=0.15", "--out", "{tmp}/a.parquet", "--plot", "{tmp}/a.xyz"], "--plot"),
+    (["tune", "--budget", "1", "--out", "{f}/t.toml"], "--out"),
+    (["tune", "--budget", "1", "--out", "{tmp}/t.toml", "--study", "{f}/study"], "--study"),
+    (["bench", "--only", "m4", "--json", "{tmp}/nod/b.json"], "--json"),
+    (["sim", "--scenario", "balance", "--no-log", "--plot", "{tmp}/x.xyz"], "--plot"),
+    (["sim", "--scenario", "balance", "--no-log", "--plot", "{tmp}"], "--plot"),
+    (["sim", "--scenario", "balance", "--no-plot", "--log", "{tmp}/x.xyz"], "--log"),
+    (["plot", "{tmp}/run.csv", "--out", "{tmp}/a.xyz"], "--out"),
+    (["plot", "{tmp}/run.csv", "--out", "{f}/a.png"], "--out"),
+    (["sim-device", "--link", "{tmp}/nod/x"], "--link"),
+    (["sim-device", "--link", "{f}"], "--link"),
+    (["scope", "--port", "sim://", "--screenshot", "{tmp}/s.xyz"], "--screenshot"),
+    (["scope", "--port", "sim://", "--screenshot", "{f}/s.png"], "--screenshot"),
+    (["scope", "--port", "sim://", "--record", "{f}/r.csv"], "--record"),
+    (["log", "--port", "sim://", "--duration", "1", "--out", "{f}/x.csv"], "--out"),
+    (["log-convert", "{tmp}/run.csv", "--out", "{f}/x.parquet"], "--out"),
+    (["gains", "--json", "{f}/d.json"], "--json"),
+    (["sil-lib", "-o", "{f}/lib.so"], "--output"),
+]
+
+
+@pytest.mark.parametrize("argv, option", OUTPUT_CASES, ids=[" ".join(a[:1] + [o]) + f"-{i}" for i, (a, o) in
+                                                             enumerate(OUTPUT_CASES)])
+def test_an_output_that_cannot_be_written_is_refused_before_any_work(argv, option, tmp_path, capsys):
+    """A missing or unwritable folder, a folder for a file, or a figure format matplotlib does not write:
+    one line naming the option, exit 2, before any design, run, board or motor motion, nothing written."""
+    from rodctl.cli import main
+
+    f = tmp_path / "file.txt"
+    f.write_text("a file, not a folder\n")
+    code = main([a.format(f=f, tmp=tmp_path) for a in argv])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"rodctl: {option} "), err
+    assert "internal error" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file.txt"]
+
+
+def test_sim_plot_onto_the_current_folder_is_a_folder_not_dot_png(tmp_path, monkeypatch, capsys):
+    from rodctl.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["sim", "--scenario", "balance", "--no-log", "--plot", "."]) == 2
+    assert capsys.readouterr().err.strip() == "rodctl: --plot .: is a folder"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_read_only_folder_is_found_by_writing_not_by_permission_bits(tmp_path, monkeypatch):
+    """Root passes os.access on a read-only bind mount's folder only if the mount is not read-only; either
+    way the helper makes (and removes) a file there, which is what fails on a read-only mount."""
+    import errno
+    import tempfile
+
+    from rodgains.errors import InputError
+
+    from rodctl.cli import outputs
+
+    ok = tmp_path / "a.json"
+    outputs.check_output(ok, "--json")
+    assert list(tmp_path.iterdir()) == []  # the probe file is gone again
+
+    def read_only(*a, **kw):
+        raise OSError(errno.EROFS, "Read-only file system")
+
+    monkeypatch.setattr(tempfile, "mkstemp", read_only)
+    with pytest.raises(InputError) as e:
+        outputs.check_output(ok, "--json")
+    assert str(e.value) == f"--json {ok}: cannot write into folder {tmp_path} (Read-only file system)"
+
+
+def test_an_existing_sim_device_link_file_is_bad_input(tmp_path):
+    f = tmp_path / "port"
+    f.write_text("not a link\n")
+    r = run_rodctl("sim-device", "--link", str(f), "--duration", "1")
+    assert r.returncode == 2
+    assert _one_line(r) == f"rodctl: --link {f} exists and is not a symlink; name another path"
+    assert f.read_text() == "not a link\n"
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["sweep", "--grid", "rod.length=0.15", "--out", "{tmp}/old.parquet"], "--out"),
+    (["sweep", "--grid", "rod.length=0.15", "--out", "{tmp}/s.parquet", "--plot", "{tmp}/old.png"], "--plot"),
+    (["robustness", "--cases", "quick", "--samples", "0", "--json", "{tmp}/old.json", "--plot", ""], "--json"),
+    (["robustness", "--cases", "quick", "--samples", "0", "--json", "", "--plot", "{tmp}/old.png"], "--plot"),
+])
+def test_sweep_and_robustness_do_not_replace_a_file_without_force(argv, option, tmp_path, capsys):
+    from rodctl.cli import main
+
+    for name in ("old.parquet", "old.png", "old.json"):
+        (tmp_path / name).write_text("keep me\n")
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"rodctl: {option} ") and err.endswith("exists; pass --force to overwrite"), err
+    assert all((tmp_path / n).read_text() == "keep me\n" for n in ("old.parquet", "old.png", "old.json"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old.json", "old.parquet", "old.png"]
+
+
+@pytest.mark.parametrize("argv, start", [
+    (["robustness", "--seconds", "1e9", "--json", "", "--plot", ""], "rodctl: --seconds 1e+09: must be in (0, 600] s"),
+    (["sweep", "--grid", "rod.length=0.15", "--seconds", "601", "--out", "{tmp}/s.parquet"], "rodctl: --seconds 601"),
+    (["identify", "--port", "sim://", "--yes", "--settle", "-5", "--out", "{tmp}/a.toml"], "rodctl: --settle -5"),
+    (["plot", "{tmp}/run.csv", "--snapshots", "-3", "--out", "{tmp}/a.png"], "rodctl: --snapshots -3"),
+    (["bench", "--only", ""], "rodctl: --only ''"),
+    (["bench", "--only", "m4,"], "rodctl: --only 'm4,'"),
+    (["scope", "--port", "sim://", "--window", "-1"], "rodctl: --window -1"),
+    (["scope", "--port", "sim://", "--window", "nan"], "rodctl: --window nan"),
+])
+def test_numbers_out_of_range_are_one_line_before_any_work(argv, start, tmp_path, capsys):
+    from rodctl.cli import main
+
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and err.startswith(start), err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_ctrl_c_while_the_modules_load_is_acted_on_after_they_have(monkeypatch, capsys):
+    """Raised inside an import, a library's bare `except:` could swallow it and the command would go on to
+    arm: while the parser's modules load it is only noted, then the command stops."""
+    import os
+    import signal
+
+    import rodctl.cli as cli
+
+    real = cli.build_parser
+
+    def build_parser_with_a_ctrl_c():
+        os.kill(os.getpid(), signal.SIGINT)  # noted, not raised here
+        return real()
+
+    monkeypatch.setattr(cli, "build_parser", build_parser_with_a_ctrl_c)
+    assert cli.main(["log", "--port", "sim://", "--arm", "swing-up", "--duration", "1"]) == 130
+    assert capsys.readouterr().err == "rodctl: interrupted\n"
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # main() leaves Python's own behind
+
+
+def test_ctrl_c_anywhere_is_one_line_and_exit_130(monkeypatch, capsys):
+    """Even while the command modules load (nothing can be armed before the link opens)."""
+    import rodctl.cli as cli
+
+    def interrupted_import():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "build_parser", interrupted_import)
+    assert cli.main(["log", "--port", "sim://"]) == 130
+    assert capsys.readouterr().err == "rodctl: interrupted\n"
+
+
+@pytest.mark.parametrize("delay", [0.3, 0.8])
+def test_an_early_ctrl_c_of_rodctl_log_is_one_line_and_exit_130(delay, tmp_path):
+    import signal
+    import time
+
+    from host_tools import start_rodctl
+
+    out = tmp_path / "early.csv"
+    p = start_rodctl("log", "--port", "sim://", "--arm", "swing-up", "--out", str(out))
+    time.sleep(delay)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=60)
+    assert "Traceback" not in err, err
+    if out.exists():  # a fast machine: the board answered in time; a normal stop, disarmed
+        assert p.returncode == 0 and "disarmed" in err, err
+        return
+    # 130; or killed by SIGINT after its message (what a shell also shows as 130): Python does that when the
+    # KeyboardInterrupt passed through an embedded interpreter call on its way to rodctl's handler
+    assert p.returncode in (130, -signal.SIGINT), err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rodctl: interrupted"), err

@@ -391,3 +391,41 @@ def test_a_killed_parquet_log_is_named_not_misread(tmp_path):
     assert not path.exists() and (tmp_path / "run.parquet.partial").exists()
     with pytest.raises(InputError, match="run.parquet.partial is an unfinished Parquet log"):
         read_log(path)
+
+
+@pytest.mark.parametrize("src,dst", [("csv", "parquet"), ("parquet", "mcap"), ("mcap", "csv")])
+def test_log_convert_carries_the_trailer_over_unchanged(tmp_path, src, dst):
+    """The recording's own counters and close time, not the conversion's: heartbeat_acks stays, closed_utc
+    is when the logger closed it."""
+    from rodctl.logs.reader import cut_short
+
+    a = tmp_path / f"a.{src}"
+    w = _write(a)
+    w.heartbeat_acks = 42
+    w.close({"frames": 302, "seq_gaps": 1, "end": "Ctrl-C"})
+    b = tmp_path / f"b.{dst}"
+    r = run_rodctl("log-convert", str(a), "--out", str(b))
+    assert r.returncode == 0, r.stderr
+    la, lb = read_log(a), read_log(b)
+    assert la.trailer["heartbeat_acks"] == "42" and la.trailer["closed_utc"]
+    assert lb.trailer == la.trailer
+    for k in ("closed_utc", "heartbeat_acks", "rows", "events", "frames", "seq_gaps", "end"):
+        assert lb.meta[k] == la.meta[k], k
+    assert lb.meta["converted_from"] == str(a) and cut_short(lb) is None
+
+
+@pytest.mark.parametrize("dst", ["parquet", "mcap", "csv"])
+def test_log_convert_of_a_cut_short_log_still_reads_as_cut_short(tmp_path, dst):
+    from rodctl.logs.reader import cut_short
+
+    a = tmp_path / "cut.csv"
+    w = _write(a)  # never closed: the logger was killed
+    w.flush()
+    assert "no trailer" in cut_short(read_log(a))
+    b = tmp_path / f"b.{dst}"
+    r = run_rodctl("log-convert", str(a), "--out", str(b))
+    assert r.returncode == 0, r.stderr
+    lb = read_log(b)
+    assert lb.trailer == {} and "closed_utc" not in lb.meta and "heartbeat_acks" not in lb.meta
+    assert "no trailer: the logger never closed it" in cut_short(lb)
+    assert len(lb.data) == len(read_log(a).data)

@@ -322,6 +322,21 @@ def test_tune_tiny_budget_writes_a_complete_file_and_resumes(tmp_path, capsys):
     assert main(argv[:4] + ["2"] + argv[5:] + ["--budget", "3", "--force"]) == 2
 
 
+def test_tune_says_plainly_when_no_trial_met_the_nominal_goals(tmp_path, capsys):
+    """0.5 s runs cannot settle by 1.5 s: every trial misses the goals, so none is scored. The file holds
+    the starting values and says so; the output says so too, with --no-goals as the way to score."""
+    out = tmp_path / "t.toml"
+    assert main(["tune", "--cases", "nominal", "--samples", "0", "--seconds", "0.5", "--only", "lqr.q_angle",
+                 "--budget", "2", "--jobs", "1", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "no trial met the nominal goals in 2 trials" in text and "none was scored" in text, text
+    assert "--no-goals" in text and "starting values unchanged" in text
+    assert "score 0.0000 (0/0)" not in text
+    written = out.read_text()
+    assert "# NOT TUNED: no trial met the nominal goals" in written and "(0/0 runs pass" not in written
+    assert load_params(out).values == load_params().values
+
+
 def test_the_first_trial_is_the_parameter_file_itself_in_every_searched_dimension():
     from rodctl.robust.tune import space, starting_point
 

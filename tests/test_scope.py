@@ -106,6 +106,35 @@ def test_ctrl_c_disarms_and_closes_without_a_traceback(xdisplay):
     assert err.strip().splitlines()[-1] == "scope ended: disarmed"
 
 
+def test_a_screenshot_that_cannot_be_saved_at_the_end_still_disarms_and_ends(xdisplay, tmp_path):
+    """The screenshot's folder disappears while the board is armed: saving it fails when the scope ends,
+    and the scope must still end (no traceback from the window's callback, no heartbeat keeping the board
+    armed): disarmed, the recording kept, then one line naming --screenshot."""
+    folder = tmp_path / "shots"
+    folder.mkdir()
+    rec = tmp_path / "run.csv"
+    proc = _start_scope(xdisplay, "--port", "sim://", "--arm", "swing-up", "--duration", "4", "--record", str(rec),
+                        "--screenshot", str(folder / "s.png"))
+    try:
+        _wait_for_window(proc)
+        folder.rmdir()
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+            pytest.fail("the scope did not end after --duration")
+    assert "Traceback" not in err and "Exception" not in err, err
+    lines = err.strip().splitlines()
+    assert lines[-2] == f"scope ended: disarmed; recorded {rec}", err
+    assert lines[-1].startswith(f"rodctl: --screenshot {folder / 's.png'}: not saved: "), err
+    assert proc.returncode == 1
+    from rodctl.logs import read_log
+
+    log = read_log(rec)
+    assert log.meta["end"] == "scope" and len(log.data) > 100  # closed cleanly; "disarmed" above is the board's ACK
+
+
 def test_scope_without_a_display_is_one_clear_line():
     env = rodctl_env()
     env.pop("DISPLAY", None)

@@ -2,20 +2,18 @@
 
 from __future__ import annotations
 
-import argparse
-import importlib
-import os
 import sys
-
-from rodgains.errors import UserError
-
-from rodctl import __version__
 
 # Subcommand modules, each with register(subparsers); imported lazily-light so `rodctl gains` starts fast.
 COMMAND_MODULES = ["gains", "protocol", "docs", "sil", "status", "check", "record", "console", "simdevice", "logconvert", "plot", "scope", "flash", "sim", "bench", "robustness", "tune", "sweep", "identify", "track"]
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser():
+    import argparse
+    import importlib
+
+    from rodctl import __version__
+
     parser = argparse.ArgumentParser(
         prog="rodctl",
         description="Soft-rod testbed: design gains, build and flash the Teensy, simulate, stream and log telemetry.",
@@ -27,9 +25,88 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+_SIGINTS = [0]  # Ctrl-Cs seen since main() started
+
+
+def interrupts() -> int:
+    """How many Ctrl-Cs (SIGINT) main() has seen: a command compares it before it arms, so that a Ctrl-C a
+    library swallowed (a bare `except:` around an import) still stops it."""
+    return _SIGINTS[0]
+
+
+def _count_and_raise(signum, frame):
+    _SIGINTS[0] += 1
+    raise KeyboardInterrupt
+
+
+def _count_only(signum, frame):
+    _SIGINTS[0] += 1
+
+
+def _set_sigint(handler) -> bool:
+    """Install `handler` for SIGINT when Python's own is there (not when SIGINT is ignored, as in a
+    background job, nor off the main thread); True when installed."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return False
+    if signal.getsignal(signal.SIGINT) not in (signal.default_int_handler, _count_and_raise, _count_only):
+        return False
+    signal.signal(signal.SIGINT, handler)
+    return True
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    """The `rodctl` entry point. Ctrl-C anywhere, even while the modules load (before any link is open, so
+    nothing can be armed), is one line and exit 130.
+
+    While the command modules load (most of the first half second), a Ctrl-C is only noted and acted on
+    once they have: raised inside an import it can be swallowed by a library's bare `except:` (the
+    command would then go on, and arm) or leave the interpreter to kill itself with SIGINT at exit."""
+    _SIGINTS[0] = 0
+    deferred = False
+    try:
+        deferred = _set_sigint(_count_only)
+        try:
+            parser = build_parser()
+            args = parser.parse_args(argv)
+        finally:
+            if deferred:
+                _set_sigint(_count_and_raise)
+        if _SIGINTS[0]:
+            raise KeyboardInterrupt
+        return _main(parser, args)
+    except KeyboardInterrupt:
+        _interrupted()
+        return 130
+    finally:
+        if deferred:  # Python's own again, for a caller of main() in the same process
+            _restore_sigint()
+
+
+def _restore_sigint() -> None:
+    import signal
+
+    try:
+        if signal.getsignal(signal.SIGINT) in (_count_and_raise, _count_only):
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+    except (ValueError, KeyboardInterrupt):
+        pass
+
+
+def _interrupted() -> None:
+    try:
+        print("rodctl: interrupted", file=sys.stderr, flush=True)
+    except (OSError, ValueError, KeyboardInterrupt):
+        pass
+
+
+def _main(parser, args) -> int:
+    import os
+
+    from rodgains.errors import UserError
+
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
@@ -39,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"rodctl: {e}", file=sys.stderr)
         return e.exit_code
     except KeyboardInterrupt:
-        print("rodctl: interrupted", file=sys.stderr)
+        _interrupted()
         return 130
     except BrokenPipeError:
         return 0

@@ -121,10 +121,19 @@ def verdict(key: str, value: float) -> str:
 
 
 def run_bench(args) -> int:
-    groups = set(args.only.split(",")) if args.only else set(GROUPS)
+    if args.only is not None:
+        groups = {g.strip() for g in args.only.split(",")}
+        if "" in groups:
+            raise InputError(f"--only {args.only!r}: name groups, comma-separated: {', '.join(GROUPS)}")
+    else:
+        groups = set(GROUPS)
     unknown = groups - set(GROUPS)
     if unknown:
         raise InputError(f"--only {args.only}: unknown group(s) {', '.join(sorted(unknown))}; {', '.join(GROUPS)}")
+    if args.json:
+        from rodctl.cli.outputs import check_output
+
+        check_output(args.json, "--json")  # before the measurements, not after them
     results = {}
     for g in GROUPS:
         if g in groups:
@@ -140,7 +149,9 @@ def run_bench(args) -> int:
         if v == "MISSED":
             missed.append(key)
     if args.json:
-        Path(args.json).write_text(json.dumps(results, indent=1) + "\n")
+        from rodgains.atomic_file import atomic_write
+
+        atomic_write(args.json, json.dumps(results, indent=1) + "\n")
         print(f"wrote {args.json}")
     return 1 if missed else 0
 

@@ -12,7 +12,7 @@ from rodgains.errors import InputError
 from rodgains.params import DEFAULT_PARAMS, Params, load_params
 
 from rodctl import paths
-from rodctl.cli.outputs import check_output, make_folder
+from rodctl.cli.outputs import check_output, check_output_folder, make_folder
 
 
 def add_param_args(p: argparse.ArgumentParser) -> None:
@@ -94,6 +94,9 @@ def run_gains(args) -> int:
             raise InputError(f"--header {args.header}: is a folder")
     elif not (args.report or args.json or args.check):
         paths.require_checkout("writing the committed header (or pass --header PATH)")
+    if (args.header or not (args.report or args.json)) and not args.check:  # the header will be written
+        header = Path(args.header) if args.header else paths.COMMITTED_HEADER
+        check_output_folder(header.parent, f"--header {header}")
     d, files = generated_files(args)
     if args.report:
         from rodgains.report import report_text

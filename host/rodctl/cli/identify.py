@@ -183,7 +183,6 @@ def run_port(args) -> int:
     if not 0 < args.soft_limit <= 1:
         raise InputError(f"--soft-limit must be in (0, 1], got {args.soft_limit:g}")
     exps = [e.scaled(torque=args.scale) for e in E.select(args.experiment)]
-    check_output(args.out, "--out", force=args.force)
     log_dir = make_folder(args.log_dir, f"--log-dir {args.log_dir}")
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     try:
@@ -282,7 +281,7 @@ def fit_logs(args, logs: list[Path], params=None, source: str = "") -> int:
     verdict = _verdict(args, R.written_params(params, res, choice))
     lines = verdict.lines(str(out))
     out.write_text(R.parameter_file(params, res, digests, compensation=choice, verdict=lines))
-    plot = Path(args.plot) if args.plot else out.with_suffix(".png")
+    plot = plot_path(args)
     R.figure(res, plot)
     print(f"wrote {out} and {plot}")
     for name, why in res.out_of_range.items():
@@ -373,6 +372,16 @@ def run_imu(args) -> int:
     return 0 if cal.ok else 1
 
 
+def plot_path(args) -> Path:
+    """--plot, else --out with .png."""
+    return Path(args.plot) if args.plot else Path(args.out).with_suffix(".png")
+
+
+def check_outputs(args) -> None:
+    check_output(args.out, "--out", force=args.force)
+    check_output(plot_path(args), "--plot", figure=True)
+
+
 def run_identify(args) -> int:
     if args.imu:
         return run_imu(args)
@@ -380,9 +389,11 @@ def run_identify(args) -> int:
         raise InputError("give recorded LOG files or --port, not both")
     if args.starts < 1:
         raise InputError("--starts must be >= 1")
+    if not (math.isfinite(args.settle) and 0 <= args.settle <= 600):
+        raise InputError(f"--settle {args.settle:g}: must be in [0, 600] s")
     _check_compensation_cases(args)
+    check_outputs(args)  # before the fit or the first experiment: the motor never moves for a bad path
     if args.logs:
-        check_output(args.out, "--out", force=args.force)
         # A shell glob such as logs/*.csv also matches the CSV logs' event sidecars: not logs of their own.
         logs = [Path(p) for p in args.logs if not str(p).endswith((".events.csv", ".csv.json"))]
         return fit_logs(args, logs)

@@ -12,6 +12,9 @@ def run_log_convert(args) -> int:
     src = Path(args.log)
     fmt = log_format(args.out, args.format) if args.out else (args.format or "parquet")
     out = Path(args.out) if args.out else src.with_suffix("." + fmt)
+    from rodctl.cli.outputs import check_output
+
+    check_output(out, "--out", make_parent=True)  # before reading the log: the folder can be written
     convert_log(src, out, fmt=fmt, overwrite=args.force)
     print(f"wrote {out}")
     return 0

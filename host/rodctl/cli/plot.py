@@ -9,7 +9,7 @@ import os
 import sys
 from pathlib import Path
 
-from rodgains.errors import UserError
+from rodgains.errors import InputError, UserError
 
 from rodctl.logs.plots import PANELS, PLOT_COLUMNS, make_figure, save_figure
 
@@ -32,6 +32,11 @@ def display_problem() -> str | None:
     return None
 
 
+def default_figure(log: str) -> str:
+    """Where a log's figure goes without --out and without a display: LOG.png."""
+    return str(Path(log).with_suffix("")) + ".png"
+
+
 def run_plot(args) -> int:
     if args.live:
         from rodctl.cli.scope import run_scope
@@ -42,8 +47,12 @@ def run_plot(args) -> int:
     from rodctl.cli.outputs import check_output
     from rodctl.logs.reader import read_log
 
+    if not 1 <= args.snapshots <= 100:
+        raise InputError(f"--snapshots {args.snapshots}: must be in 1 .. 100")
     if args.out is not None:  # a single named result: its folder must exist, so a typo is caught
-        check_output(args.out, "--out")
+        check_output(args.out, "--out", figure=True)
+    elif display_problem() is not None:  # LOG.png beside the log: checked before reading it
+        check_output(default_figure(args.log), "figure (no --out, no display)", figure=True)
     from rodctl.logs.reader import cut_short
 
     log = read_log(args.log, columns=PLOT_COLUMNS)
@@ -61,7 +70,7 @@ def run_plot(args) -> int:
         return 0
     fig = make_figure(meta, data, snapshots=args.snapshots)
     if out is None:
-        out = str(Path(args.log).with_suffix("")) + ".png"
+        out = default_figure(args.log)
         print(f"no display: writing {out}", file=sys.stderr)
     path = save_figure(fig, out)
     print(f"wrote {path}: {len(data)} telemetry frames, panels: {', '.join(PANELS)}")

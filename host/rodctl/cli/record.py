@@ -18,6 +18,9 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
     from rodctl.logs.metadata import device_metadata
     from rodctl.logs.writer import LogWriter, check_new, log_format, require_format
 
+    from rodctl.cli import interrupts
+
+    interrupts_at_start = interrupts()
     duration = getattr(args, "duration", None)
     check_duration(duration)
     fmt = None
@@ -25,6 +28,9 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
         fmt = log_format(out, getattr(args, "format", None))
         require_format(fmt)  # before touching the board
         check_new(out, fmt, getattr(args, "force", False))
+        from rodctl.cli.outputs import check_output
+
+        check_output(out, "--out", make_parent=True)  # the folder can be written, before the board is touched
     session = session_for(args)
     writer = None
     status = StatusLine()
@@ -49,6 +55,8 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
                   f"{1e6 / h.period_us:g} Hz, {design}); Ctrl-C stops" + (" and disarms" if arm_mode else ""),
                   file=sys.stderr, flush=True)
             if arm_mode is not None:
+                if interrupts() != interrupts_at_start:  # a Ctrl-C that something swallowed: never arm after it
+                    raise KeyboardInterrupt
                 ack = session.arm(arm_mode)
                 print(f"armed {arm_mode.name.lower().replace('_', '-')}: mode {name_of(P.Mode, ack.mode)}",
                       file=sys.stderr, flush=True)
@@ -100,6 +108,10 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
               file=sys.stderr, flush=True)
     if error is not None:
         raise error
+    if ended == "Ctrl-C" and session.hello is None:  # before the board answered: nothing armed, nothing written
+        print("rodctl: interrupted before the board answered; nothing was armed or written", file=sys.stderr,
+              flush=True)
+        return 130
     return 0
 
 

@@ -29,6 +29,9 @@ def add_score_args(p) -> None:
                    help="simulated length of every run [s] (default: the matrix's for each task)")
 
 
+MAX_SECONDS = 600.0  # a run's simulated length, as `rodctl sim --duration`
+
+
 def check_score_args(args) -> None:
     from rodgains.errors import InputError
 
@@ -39,8 +42,8 @@ def check_score_args(args) -> None:
         raise InputError(f"--samples {args.samples}: must be >= 0")
     if args.seed is not None and not 0 <= args.seed < 2**32:
         raise InputError(f"--seed {args.seed}: must be in 0 .. 2^32 - 1")
-    if args.seconds is not None and not args.seconds > 0:
-        raise InputError(f"--seconds {args.seconds}: must be > 0")
+    if args.seconds is not None and not 0 < args.seconds <= MAX_SECONDS:
+        raise InputError(f"--seconds {args.seconds:g}: must be in (0, {MAX_SECONDS:g}] s")
 
 
 def command_line(argv_tail: list[str]) -> str:
@@ -110,9 +113,10 @@ def run_robustness(args) -> int:
     params = params_from_args(args)
     plant = plant_from_args(args)
     check_score_args(args)
-    for flag, path in (("--json", args.json), ("--plot", args.plot)):
-        if path:
-            check_output(path, flag)  # before the runs, not after them
+    if args.json:  # before the runs, not after them
+        check_output(args.json, "--json", force=args.force)
+    if args.plot:
+        check_output(args.plot, "--plot", force=args.force, figure=True)
     units = S.units(params, args.cases, args.samples, args.seed, args.seconds, plant=plant)
     t0 = time.monotonic()
     with Runner(args.jobs, args.scheduler) as runner:
@@ -176,5 +180,6 @@ def register(sub) -> None:
                    help="every run's metrics and parameters (default robustness.json; '' for none)")
     r.add_argument("--plot", default="robustness.png", metavar="PNG",
                    help="case x metric heatmap, pass/fail marked (default robustness.png; '' for none)")
+    r.add_argument("--force", action="store_true", help="replace an existing --json or --plot")
     r.set_defaults(func=run_robustness)
 

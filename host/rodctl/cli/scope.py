@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rodgains.errors import UserError
+from rodgains.errors import InputError, UserError
 
 from rodctl.link import protocol as P
 
@@ -287,24 +287,53 @@ class Scope:
         self.fig.canvas.draw_idle()
 
 
-def run_scope(args) -> int:
+def check_scope_args(args) -> None:
+    """Every option the scope takes, before the board is touched (InputError: one line, exit 2)."""
+    import math
+
     from rodctl.cli.common import check_duration
-    from rodctl.cli.plot import display_problem
+    from rodctl.cli.outputs import check_output
 
     check_duration(args.duration)
+    if not (math.isfinite(args.window) and 0 < args.window <= 3600):
+        raise InputError(f"--window {args.window:g}: must be in (0, 3600] s")
+    if args.screenshot is not None:  # replaced when it exists: the latest look of the window
+        check_output(args.screenshot, "--screenshot", force=True, figure=True)
+    if args.record:
+        from rodctl.logs.writer import check_new, log_format
+
+        check_new(args.record, log_format(args.record, args.format), args.force)
+        check_output(args.record, "--record", make_parent=True)
+
+
+def _quit_window_loop(fig) -> None:
+    """End the GUI's event loop even when closing the window failed (Tk: quit(); Qt: close())."""
+    win = getattr(getattr(fig.canvas, "manager", None), "window", None)
+    for name in ("quit", "close"):
+        f = getattr(win, name, None)
+        if callable(f):
+            try:
+                f()
+            except Exception:  # noqa: BLE001 - ending: the next try, then the session's disarm
+                continue
+            return
+
+
+END_GRACE_S = 3.0  # the window should be gone this long after the scope ends; else its loop is quit
+
+
+def run_scope(args) -> int:
+    from rodctl.cli.plot import display_problem
+
+    from rodctl.cli import interrupts
+
+    interrupts_at_start = interrupts()
+    check_scope_args(args)
     why = display_problem()
     if why is not None:
         raise UserError(f"the scope needs a display: {why}. Record instead with "
                         f"`rodctl log --port {args.port or 'PORT'} --out run.csv`, then "
                         "`rodctl plot run.csv --out run.png`")
-    if getattr(args, "screenshot", None):
-        from rodctl.cli.outputs import check_output
-
-        check_output(args.screenshot, "--screenshot", force=True)
-    if args.record:
-        from rodctl.logs.writer import check_new, log_format
-
-        check_new(args.record, log_format(args.record, args.format), args.force)
     import matplotlib.pyplot as plt
 
     from rodctl.cli.common import design_params, session_for
@@ -312,6 +341,7 @@ def run_scope(args) -> int:
 
     stop = threading.Event()
     old = {}
+    failures: list[BaseException] = []  # what went wrong in the window's callbacks or while ending
 
     def request_stop(signum, frame):
         stop.set()
@@ -340,19 +370,42 @@ def run_scope(args) -> int:
                           title=title)
             if args.record:
                 scope.toggle_recording()
-            if args.arm:
+            if interrupts() != interrupts_at_start:  # a Ctrl-C that something swallowed: end, never arm
+                stop.set()
+            if args.arm and not stop.is_set():
                 scope.action(args.arm)
             t_end = None if args.duration is None else time.monotonic() + args.duration
 
-            shot = {"saved": False}
+            shot = {"tried": False}
+            ending = {"since": None}
 
             def tick():
-                if stop.is_set() or (t_end is not None and time.monotonic() >= t_end):
-                    if args.screenshot and not shot["saved"]:  # before the window closes: what it showed last
-                        fig.savefig(args.screenshot, dpi=100)
-                        shot["saved"] = True
+                # Nothing may escape: an exception in a GUI callback is printed and the loop goes on, with the
+                # heartbeat keeping the board armed. Any failure ends the scope (the session then disarms).
+                try:
+                    if stop.is_set() or (t_end is not None and time.monotonic() >= t_end):
+                        if ending["since"] is None:
+                            ending["since"] = time.monotonic()
+                        if args.screenshot and not shot["tried"]:  # before the window closes: what it showed last
+                            shot["tried"] = True  # once, saved or not
+                            try:
+                                fig.savefig(args.screenshot, dpi=100)
+                            except Exception as e:  # noqa: BLE001 - said after the disarm
+                                failures.append(UserError(f"--screenshot {args.screenshot}: not saved: "
+                                                          f"{getattr(e, 'strerror', None) or e}"))
+                        scope.stop_requested = True
+                    scope.update()
+                except Exception as e:  # noqa: BLE001 - said after the disarm
+                    failures.append(e)
                     scope.stop_requested = True
-                scope.update()
+                    if ending["since"] is None:
+                        ending["since"] = time.monotonic()
+                    try:
+                        plt.close(fig)
+                    except Exception:  # noqa: BLE001
+                        pass
+                if ending["since"] is not None and time.monotonic() - ending["since"] > END_GRACE_S:
+                    _quit_window_loop(fig)
 
             timer = fig.canvas.new_timer(interval=100)
             timer.add_callback(tick)
@@ -364,19 +417,30 @@ def run_scope(args) -> int:
                 plt.show()
             except KeyboardInterrupt:
                 pass
-            timer.stop()
+            try:
+                timer.stop()
+            except Exception:  # noqa: BLE001 - the window is gone
+                pass
         finally:
             for sig, hnd in old.items():
                 signal.signal(sig, hnd)
-            if scope is not None:
-                scope.finish()
-            plt.close("all")
+            for end in ((scope.finish,) if scope is not None else ()) + (lambda: plt.close("all"),):
+                try:
+                    end()
+                except Exception as e:  # noqa: BLE001 - the session below still disarms; said after it
+                    failures.append(e)
     rec = f"; recorded {', '.join(scope.recorded)}" if scope is not None and scope.recorded else ""
-    if getattr(args, "screenshot", None) and Path(args.screenshot).is_file():
+    if getattr(args, "screenshot", None) and shot_saved(args.screenshot, failures):
         rec += f"; screenshot {args.screenshot}"
     print(f"scope ended: {'disarmed' if s.disarm_acked else 'disarm not confirmed (the watchdog disarms)'}{rec}",
           file=sys.stderr, flush=True)
+    if failures:
+        raise failures[0]
     return 0
+
+
+def shot_saved(path: str, failures: list) -> bool:
+    return Path(path).is_file() and not any(str(f).startswith("--screenshot ") for f in failures)
 
 
 def register(sub) -> None:

@@ -14,6 +14,10 @@ def run_sil_lib(args) -> int:
     from rodctl.build.sil_build import build_sil
 
     params = params_from_args(args)
+    if args.output and not (Path(args.output).is_dir() or args.output.endswith(("/", "\\"))):
+        from rodctl.cli.outputs import check_output
+
+        check_output(args.output, "--output", make_parent=True)  # before the build, not after it
     args.header = None  # the regenerate line names the parameters, not a header path
     lib = build_sil(params, command=regenerate_command(args))
     if args.output:

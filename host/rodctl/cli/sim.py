@@ -12,7 +12,7 @@ import numpy as np
 from rodgains.errors import InputError
 
 from rodctl.cli.gains import add_param_args, params_from_args
-from rodctl.cli.outputs import make_folder
+from rodctl.cli.outputs import check_name, check_output, make_folder
 
 TABLE_BEGIN = "<!-- BEGIN scenario table: regenerate with `rodctl sim --all --figures docs/img --table docs/scenarios.md` -->"
 TABLE_END = "<!-- END scenario table -->"
@@ -110,9 +110,18 @@ def run_one(args, name: str, params, all_mode: bool = False):
 
     scen = SCENARIOS[name]
     plot, log = _outputs(args, name, all_mode)
-    for path, flag in ((plot, "--figures" if all_mode else "--plot"), (log, "--log")):  # before the run
-        if path is not None:
+    for path, flag, figure in ((plot, "--figures" if all_mode else "--plot", True), (log, "--log", False)):
+        if path is not None:  # before the run: the name, then the folder (made), then that it can be written
+            check_name(path, flag, figure=figure)
+            if not figure:
+                from rodctl.logs.writer import log_format
+
+                try:
+                    log_format(path)  # .csv, .parquet or .mcap
+                except InputError as e:
+                    raise InputError(f"{flag} {e}") from None
             make_folder(path.parent, f"{flag} {path}")
+            check_output(path, flag, figure=figure)
     if log is not None and args.log and not args.force:  # an explicit --log is never replaced silently
         from rodctl.logs.writer import check_new
 
@@ -175,6 +184,19 @@ def table_markdown(outcomes) -> str:
     return "\n".join(rows) + "\n\nPass criteria:\n\n" + crit + "\n"
 
 
+def check_table_page(readme: Path) -> None:
+    """InputError unless `readme` exists, holds the scenario-table markers, and can be rewritten."""
+    check_output(readme, "--table")
+    try:
+        text = readme.read_text()
+    except FileNotFoundError:
+        raise InputError(f"--table {readme}: no such file (it needs the scenario-table markers)") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(f"--table {readme}: cannot read it ({getattr(e, 'strerror', None) or e})") from None
+    if TABLE_BEGIN not in text or TABLE_END not in text:
+        raise InputError(f"{readme}: no scenario-table markers ({TABLE_BEGIN!r} ... {TABLE_END!r}) to replace")
+
+
 def replace_table(readme: Path, table: str) -> None:
     text = readme.read_text() if readme.exists() else ""
     block = f"{TABLE_BEGIN}\n{table}{TABLE_END}"
@@ -206,6 +228,8 @@ def run_sim(args) -> int:
     for name in names:
         if name not in SCENARIOS:
             raise InputError(f"unknown scenario {name!r}; one of: {', '.join(SCENARIOS)} (rodctl sim --list)")
+    if args.all and args.readme:  # before every scenario has run, not after
+        check_table_page(Path(args.readme))
     outcomes, unexpected = [], []
     for name in names:
         o, wall, written = run_one(args, name, params, all_mode=args.all)

@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from rodgains.errors import UserError
+from rodgains.errors import InputError, UserError
 from rodctl.cli.common import check_duration, mode_text, stop_signals
 
 
@@ -18,6 +18,8 @@ def run_sim_device(args) -> int:
     from rodctl.sim.device import RealTimeRunner, VirtualDevice
 
     check_duration(args.duration)
+    if args.link:
+        check_link(args.link)
     if not hasattr(os, "openpty"):
         raise UserError("sim-device --pty needs a POSIX system (pseudo-terminals)")
     dev = VirtualDevice.from_options(plant=args.plant, edges=args.edges, params=args.params, set=args.overrides,
@@ -73,11 +75,16 @@ def run_sim_device(args) -> int:
     link = None
     if args.link:
         link = Path(args.link)
-        if link.is_symlink() or link.exists():
-            if not link.is_symlink():
-                raise UserError(f"--link {link} exists and is not a symlink")
-            link.unlink()
-        link.symlink_to(name)
+        try:
+            if link.is_symlink():  # an earlier sim-device's link: replaced
+                link.unlink()
+            link.symlink_to(name)
+        except OSError as e:
+            for fd in (master, slave):
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+            dev.close()
+            raise InputError(f"--link {link}: cannot make the link: {e.strerror or e}") from None
     # What the USB link and the host's serial driver hold unread (like a CDC-ACM port's 64 kB): beyond
     # it the board's own TX buffer fills and it drops frames, counted in telemetry.frames_dropped.
     runner = RealTimeRunner(dev, take_input=take_input, deliver=deliver, backlog=backlog, max_backlog=65536,
@@ -106,6 +113,17 @@ def run_sim_device(args) -> int:
         raise UserError(f"virtual board stopped: {type(runner.error).__name__}: {runner.error}")
     print(f"sim-device: stopped after {dev.time:.1f} s of device time", file=sys.stderr)
     return 0
+
+
+def check_link(path: str) -> None:
+    """--link PATH, before the board starts: a symlink there is replaced; anything else is refused, and
+    its folder must exist and be writable (InputError, exit 2)."""
+    from rodctl.cli.outputs import check_output
+
+    link = Path(path)
+    if link.exists() and not link.is_symlink():
+        raise InputError(f"--link {link} exists and is not a symlink; name another path")
+    check_output(link, "--link")
 
 
 def register(sub) -> None:

@@ -40,9 +40,9 @@ def run_sweep(args) -> int:
     if not str(args.out).endswith(".parquet"):
         raise InputError(f"--out {args.out}: the sweep writes Parquet; name it *.parquet")
     plot = args.plot if args.plot is not None else str(Path(args.out).with_suffix(".png"))
-    for flag, path in (("--out", args.out), ("--plot", plot)):
-        if path:
-            check_output(path, flag)  # before the runs, not after them
+    check_output(args.out, "--out", force=args.force)  # before the runs, not after them
+    if plot:
+        check_output(plot, "--plot", force=args.force, figure=True)
 
     per_point = len(S.units(params, args.cases, args.samples, args.seed, args.seconds)) if args.scenario == "score" else 1
     total = W.size(axes) * per_point
@@ -142,5 +142,6 @@ def register(sub) -> None:
     add_exec_args(s)
     s.add_argument("--out", required=True, metavar="PARQUET", help="one row per run")
     s.add_argument("--plot", metavar="PNG", help="figure (default: --out with .png; '' for none)")
+    s.add_argument("--force", action="store_true", help="replace an existing --out or --plot")
     s.add_argument("--yes", action="store_true", help="run a grid of more than 100,000 runs")
     s.set_defaults(func=run_sweep)

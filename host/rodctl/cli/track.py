@@ -52,7 +52,7 @@ def run_track_command(args) -> int:
         raise InputError(f"--out {out}: the tracked log is Parquet (.parquet); its MCAP goes beside it")
     check_output(out, "--out")
     if args.plot:
-        check_output(args.plot, "--plot")
+        check_output(args.plot, "--plot", figure=True)
     if not Path(args.video).is_file():
         raise InputError(f"video {args.video}: no such file")
     if not Path(args.log).is_file():

@@ -9,7 +9,7 @@ import time
 from rodgains.errors import InputError
 
 from rodctl.cli.gains import add_param_args, params_from_args
-from rodctl.cli.outputs import check_output
+from rodctl.cli.outputs import check_output, check_output_folder
 from rodctl.cli.robustness import add_exec_args, add_score_args, check_score_args
 
 
@@ -47,6 +47,8 @@ def run_tune(args) -> int:
     if args.budget < 1:
         raise InputError(f"--budget {args.budget}: must be >= 1")
     check_output(args.out, "--out", force=args.force)
+    if args.study:
+        check_output_folder(args.study, f"--study {args.study}")
     dims = T.space(args.only, params)
     seed = params["uncertainty"]["seed"] if args.seed is None else args.seed
     samples = params["uncertainty"]["samples"] if args.samples is None else args.samples
@@ -83,11 +85,15 @@ def run_tune(args) -> int:
     text = T.tuned_file(params, summary, dims, reproduce_command(args), check, goals=args.goals)
     atomic_write(args.out, text)
     b, s = summary["best"], summary["start"]
+    if not summary.get("goals_met", True):
+        print(T.unscored_text(summary))
+        print(f"wrote {args.out} with the starting values unchanged  ({summary['trials']} trials, {wall:.0f} s in "
+              f"this session); to score the trials without the nominal goals: --no-goals")
+        return 0
     print(f"start  (trial #{summary['start_number']}): score {s.get('score', 0):.4f} ({s.get('passed', 0)}/"
           f"{s.get('runs', 0)}), margin {s.get('margin', 0):.4f}")
     print(f"tuned  (trial #{summary['best_number']}): score {b.get('score', 0):.4f} ({b.get('passed', 0)}/"
-          f"{b.get('runs', 0)}), margin {b.get('margin', 0):.4f}"
-          + ("" if b.get("violation", 0.0) <= 0.0 else "  (misses the nominal goals: no trial met them)"))
+          f"{b.get('runs', 0)}), margin {b.get('margin', 0):.4f}")
     for k, v in summary["best_values"].items():
         print(f"  {k} = {T.fmt_value(v)}")
     print(f"wrote {args.out}  ({summary['trials']} trials, {wall:.0f} s in this session)")

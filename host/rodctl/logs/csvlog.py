@@ -21,6 +21,7 @@ from rodgains.atomic_file import atomic_write
 from rodgains.errors import InputError
 
 from rodctl.logs import schema
+from rodctl.logs.schema import TRAILER_KEY
 
 SIDECAR_SUFFIX = ".json"
 EVENTS_SUFFIX = ".events.csv"
@@ -170,7 +171,9 @@ def read(path: Path, names: list[str] | None):
         try:
             doc = json.loads(side.read_text())
             meta.update(doc.get("metadata", {}))
-            meta.update({k: str(v) for k, v in doc.get("trailer", {}).items()})
+            trailer = {k: str(v) for k, v in (doc.get("trailer") or {}).items()}
+            meta.update(trailer)
+            meta[TRAILER_KEY] = trailer
             meta["columns"] = doc.get("columns", {})
         except (ValueError, OSError, AttributeError) as e:
             _warn(f"{side}: unreadable sidecar ({e}); plotting without metadata")

@@ -22,6 +22,7 @@ import numpy as np
 from rodgains.errors import InputError
 
 from rodctl.logs import schema
+from rodctl.logs.schema import TRAILER_KEY
 from rodctl.logs.metadata import edge_length
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -124,6 +125,7 @@ def read(path: Path, names: list[str] | None):
             raise InputError(f"{path}: not an MCAP file")
         f.seek(0)
         meta: dict = {}
+        trailer: dict | None = None
         channels: dict[int, str] = {}
         tl: list[dict] = []
         events: list[dict] = []
@@ -140,6 +142,8 @@ def read(path: Path, names: list[str] | None):
                     channels[rec.id] = rec.topic
                 elif isinstance(rec, Metadata) and rec.name in ("rodctl", "rodctl_trailer"):
                     meta.update(rec.metadata)
+                    if rec.name == "rodctl_trailer":
+                        trailer = {**(trailer or {}), **rec.metadata}
         except Exception as e:  # noqa: BLE001 - the mcap library raises many kinds on a cut or damaged file
             cut = 1
             if not tl:
@@ -153,4 +157,5 @@ def read(path: Path, names: list[str] | None):
         raise InputError(f"{path}: no column {missing[0]}")
     cols = {c: [m.get(c) for m in tl] for c in want}
     meta["incomplete_rows"] = str(cut)
+    meta[TRAILER_KEY] = dict(trailer or {})
     return meta, cols, events

@@ -15,6 +15,7 @@ from pathlib import Path
 from rodgains.errors import InputError
 
 from rodctl.logs import schema
+from rodctl.logs.schema import TRAILER_KEY
 
 PARTIAL_SUFFIX = ".partial"
 
@@ -96,7 +97,9 @@ def read(path: Path, names: list[str] | None):
         raise InputError(f"{path}: a Parquet file, but not a rodctl log (no rodctl metadata)")
     try:
         meta = json.loads(md[b"rodctl"])
-        meta.update({k: str(v) for k, v in json.loads(md.get(b"rodctl_trailer", b"{}")).items()})
+        trailer = {k: str(v) for k, v in (json.loads(md.get(b"rodctl_trailer", b"{}")) or {}).items()}
+        meta.update(trailer)
+        meta[TRAILER_KEY] = trailer
         events = json.loads(md.get(b"rodctl_events", b"[]"))
     except ValueError as e:
         raise InputError(f"{path}: damaged rodctl metadata ({e})") from None

@@ -24,11 +24,14 @@ from rodctl.logs.writer import EXTENSIONS, LogWriter, log_format
 
 
 class Log(tuple):
-    """(meta, data) that also carries .events (structured array), .format and .path."""
+    """(meta, data) that also carries .events (structured array), .format, .path and .trailer (the
+    counters written at a clean close, as stored; {} when the logger never closed it; they are in
+    meta too)."""
 
-    def __new__(cls, meta, data, events, fmt, path):
+    def __new__(cls, meta, data, events, fmt, path, trailer=None):
         self = super().__new__(cls, (meta, data))
         self.events, self.format, self.path = events, fmt, path
+        self.trailer = dict(trailer or {})
         return self
 
     @property
@@ -169,7 +172,8 @@ def read_log(path: str | Path, columns: list[str] | None = None) -> Log:
     del cols
     if "seq_count" in order and data.size and np.any(np.diff(data["seq_count"]) < 0):
         meta["seq_restarts"] = meta.get("seq_restarts", "1")
-    return Log(meta, data, _events_array(events), fmt, path)
+    trailer = meta.pop(schema.TRAILER_KEY, None) or {}
+    return Log(meta, data, _events_array(events), fmt, path, trailer)
 
 
 def cut_short(log: "Log") -> str | None:
@@ -195,8 +199,11 @@ def convert_log(src: str | Path, out: str | Path, fmt: str | None = None, overwr
     if src.resolve() == out.resolve():
         raise InputError(f"{out} is the log being converted; choose another --out")
     log = read_log(src)
+    # the metadata as written (the reader adds columns, incomplete_rows and the trailer's values), and where
+    # this copy came from; the trailer is carried over as it is below, or stays absent
     meta = {k: v for k, v in log.meta.items() if k not in ("columns", "incomplete_rows", "rows", "events",
-                                                          "closed_utc")}
+                                                          "closed_utc", *log.trailer)}
+    meta["converted_from"] = str(src)
     n = schema.n_edges_of(log.data.dtype.names)
     w = LogWriter(out, meta, n=n, fmt=fmt, overwrite=overwrite)
     want = schema.column_names(n)
@@ -210,8 +217,7 @@ def convert_log(src: str | Path, out: str | Path, fmt: str | None = None, overwr
         for k in range(0, len(rows), 50000):
             w._sink.write_rows(rows[k:k + 50000])
         w._sink.write_events(ev)
-    w.close({k: v for k, v in log.meta.items() if k in ("frames", "seq_gaps", "crc_errors", "end")}
-            | {"converted_from": str(src)})
+    w.close(log.trailer, verbatim=True)  # the recording's own counters and close time, or none: still cut short
     return out
 
 

@@ -11,6 +11,9 @@ import math
 
 import numpy as np
 
+# The format readers hand read_log the trailer (the counters written at a clean close) under this key, beside
+# its values merged into the metadata; read_log takes it out as Log.trailer (log-convert carries it over).
+TRAILER_KEY = "\0trailer"
 FORMAT_VERSION = "3"  # 3: the tip IMU's columns; 2: without them; 1: CSV with '#' metadata lines (no longer written)
 
 # (name, numpy dtype, unit, meaning). "i8" columns are never empty; "f8" columns are f32 values from the device.

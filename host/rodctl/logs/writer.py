@@ -260,18 +260,23 @@ class LogWriter:
                 if not self.closed:
                     self._flush_locked()
 
-    def close(self, trailer: dict | None = None) -> Path:
-        """Write what is left and the trailer (counters). Returns the log path."""
+    def close(self, trailer: dict | None = None, *, verbatim: bool = False) -> Path:
+        """Write what is left and the trailer (counters). Returns the log path. verbatim: `trailer` is the
+        whole trailer, as is (a converted log's; {} or None: none, so the log still reads as cut short),
+        without this writer's close time and counts."""
         with self._lock:
             if self.closed:
                 return self.path
             self._release_held()
             self._flush_locked()
-            tr = {"closed_utc": utc_now(), "rows": str(self.rows), "events": str(self.events),
-                  "heartbeat_acks": str(self.heartbeat_acks)}
-            if self.imu_unmatched:
-                tr["imu_unmatched"] = str(self.imu_unmatched)
-            tr.update({k: str(v) for k, v in (trailer or {}).items()})
+            if verbatim:
+                tr = {k: str(v) for k, v in (trailer or {}).items()}
+            else:
+                tr = {"closed_utc": utc_now(), "rows": str(self.rows), "events": str(self.events),
+                      "heartbeat_acks": str(self.heartbeat_acks)}
+                if self.imu_unmatched:
+                    tr["imu_unmatched"] = str(self.imu_unmatched)
+                tr.update({k: str(v) for k, v in (trailer or {}).items()})
             try:
                 self._sink.close(tr)
             except OSError as e:

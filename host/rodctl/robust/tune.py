@@ -291,6 +291,10 @@ def tune(params: Params, runner, *, dims: tuple[Dim, ...], budget: int, make_uni
     trials = completed(study)
     best = best_feasible(study)
     first = min(trials, key=lambda t: t.number)
+    goals_met = best.user_attrs.get("violation", 0.0) <= 0.0
+    closest = best
+    if not goals_met:  # no trial met the goals, so none was scored: nothing beats the starting point
+        best = first
     return {
         "best_number": best.number,
         "best_values": {d.name: best.params[d.name] for d in dims if d.name in best.params},
@@ -298,7 +302,18 @@ def tune(params: Params, runner, *, dims: tuple[Dim, ...], budget: int, make_uni
         "start": dict(first.user_attrs),
         "start_number": first.number,
         "trials": len(trials),
+        "goals_met": goals_met,
+        "closest_number": closest.number,
+        "closest_missed": list(closest.user_attrs.get("missed_goals", [])),
     }
+
+
+def unscored_text(summary: dict) -> str:
+    """What a search in which no trial met the nominal goals did (nothing was scored)."""
+    missed = summary.get("closest_missed") or []
+    closest = f"; the closest, trial #{summary['closest_number']}, missed {', '.join(missed)}" if missed else ""
+    return (f"no trial met the nominal goals in {summary['trials']} trials{closest}: none was scored, so nothing "
+            "was tuned")
 
 
 def write_trials(study, path: Path) -> None:
@@ -321,15 +336,25 @@ def tuned_file(params: Params, summary: dict, dims: tuple[Dim, ...], reproduce: 
     def sc(d):
         return f"{d.get('score', 0):.4f} ({d.get('passed', 0)}/{d.get('runs', 0)} runs pass, margin {d.get('margin', 0):.4f})"
 
+    met = summary.get("goals_met", b.get("violation", 0.0) <= 0.0)
     lines = [
         "# Tuned by `rodctl tune` (Optuna TPE) for the robustness score: the fraction of matrix and",
         "# Monte Carlo runs that pass on the faithful plant, the margin breaking ties (host/rodctl/robust/score.py).",
-        f"# Starting point: {shown_path(params.source)} (sha256 {params.sha256()[:16]}), trial #{summary['start_number']}: "
-        f"score {sc(s)}",
-        f"# Tuned:          trial #{summary['best_number']} of {summary['trials']}: score {sc(b)}",
     ]
+    if met:
+        lines += [
+            f"# Starting point: {shown_path(params.source)} (sha256 {params.sha256()[:16]}), trial "
+            f"#{summary['start_number']}: score {sc(s)}",
+            f"# Tuned:          trial #{summary['best_number']} of {summary['trials']}: score {sc(b)}",
+        ]
+    else:
+        lines += [
+            f"# Starting point: {shown_path(params.source)} (sha256 {params.sha256()[:16]}), trial "
+            f"#{summary['start_number']}: not scored",
+            f"# NOT TUNED: {unscored_text(summary)}. These are the starting values, unchanged;",
+            "# `--no-goals` scores the trials without the nominal goals.",
+        ]
     if goals:
-        met = b.get("violation", 0.0) <= 0.0
         lines.append("# Constraint: the nominal goals of the faithful-rod scenarios (balance within 1 deg by 1.5 s, swing-up "
                      "caught by 5 s and settled 2 s after the catch)" + ("" if met else ": NOT MET by any trial"))
     lines.append("# Searched (everything else is the starting point's):")
