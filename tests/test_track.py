@@ -172,3 +172,141 @@ def test_bad_input_is_one_line_and_exit_2(filmed, tmp_path, args, message):
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert message in r.stderr
     assert not (tmp_path / "t.parquet").exists()
+
+
+# --- clips made from the 120 fps one with OpenCV (read, change, write again as MP4) ----------------------
+
+def rewrite(src, dst, change=lambda k, frame: frame, keep=lambda k: True):
+    """dst: src's frames (those `keep` keeps) through `change(index, frame)`, encoded again (mp4v)."""
+    from rodctl.track.render import write_video
+
+    cap = cv2.VideoCapture(str(src))
+    fps, size = cap.get(cv2.CAP_PROP_FPS), (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+
+    def frames():
+        k = 0
+        while True:
+            ok, f = cap.read()
+            if not ok:
+                return
+            if keep(k):
+                yield change(k, f)
+            k += 1
+
+    write_video(dst, fps, frames(), size)
+    cap.release()
+    return dst
+
+
+def test_a_video_started_before_the_log_is_aligned(tmp_path):
+    """The camera started 0.5 s before the log: the log covers 92 % of the clip (the lag search scored
+    r * overlap and took a lag 0.86 s off, with the drift at its +5000 ppm limit)."""
+    from rodctl.track import track
+    from rodctl.track.render import Filming, demo
+
+    n = 720
+    f = Filming(fps=120, offset_s=-0.5, drift_ppm=60.0, seconds=6.0, repeated_frames=(n // 8, n // 3),
+                hand_frames=(n // 2, n // 2 + 30))
+    d = demo(tmp_path, fps=120, seconds=6.0, filming=f)
+    a = track(d["video"], d["log"], None, say=None).alignment
+    assert abs(a.offset_s - (-0.5)) <= 1 / 120, a
+    assert abs(a.drift_ppm - 60.0) <= DRIFT_PPM, a
+
+
+def test_dropped_frames_are_refused_not_fitted(filmed, tmp_path):
+    """10 frames of 720 left out (the container still says 120 fps): no clock fits; the fit's drift
+    would stop at its +5000 ppm limit and be printed as measured."""
+    d = filmed[120]
+    drop = {60, 130, 200, 270, 340, 410, 480, 550, 620, 690}
+    video = rewrite(d["video"], tmp_path / "dropped.mp4", keep=lambda k: k not in drop)
+    out = tmp_path / "t.parquet"
+    r = run_rodctl("track", str(video), "--log", str(d["log"]), "--out", str(out), "--quiet", timeout=300)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "ran into its limit" in r.stderr and not out.exists() and not out.with_suffix(".mcap").exists()
+
+
+def test_a_rolled_camera_without_calibration_is_levelled(filmed, tmp_path):
+    """The camera rolled 10 deg, no --calibrate: the roll the alignment measures is taken off every angle
+    (it was left in: every edge 9 to 10 deg off)."""
+    from rodctl.track import track
+
+    d = filmed[120]
+    h, w = cv2.imread(str(d["board"])).shape[:2]
+    M = cv2.getRotationMatrix2D((w / 2, h / 2), 10.0, 1.0)  # counter-clockwise in the image
+    video = rewrite(d["video"], tmp_path / "rolled.mp4",
+                    change=lambda k, f: cv2.warpAffine(f, M, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
+    said = []
+    r = track(video, d["log"], None, say=said.append)
+    assert np.degrees(r.roll_removed_rad) == pytest.approx(10.0, abs=1.0)
+    assert len(said) == 1 and said[0].startswith("level: no --calibrate")
+    ok = np.isfinite(r.theta).all(axis=1)
+    true_t = d["filming"].log_time(np.arange(r.frames))
+    rms = np.sqrt(np.mean(wrap_deg(r.theta[ok] - truth_angles(d, true_t[ok])) ** 2, axis=0))
+    assert rms.max() <= 1.5, rms.round(2)
+
+
+def test_flickering_light_is_no_repeated_frame(filmed, tmp_path):
+    """100 Hz light flicker (25 %) at 120 fps: only the two repeated frames are flagged (a brightness
+    test flagged a third of the frames)."""
+    from rodctl.track import track
+    from rodctl.track.calibrate import View
+    from rodctl.track.shape import REPEATED
+
+    d = filmed[120]
+
+    def flicker(k, f):
+        return np.clip(f * (1.0 + 0.25 * np.sin(2 * np.pi * 100.0 * k / 120.0)), 0, 255).astype(np.uint8)
+
+    video = rewrite(d["video"], tmp_path / "flicker.mp4", change=flicker)
+    r = track(video, d["log"], None, view=View.from_checkerboard(d["board"], (9, 6), 0.02))
+    flagged = set(np.flatnonzero(r.quality == REPEATED))
+    assert flagged and flagged <= set(d["filming"].repeated_frames), sorted(flagged)
+
+
+def test_a_marker_cut_by_the_image_border_is_not_seen(filmed, tmp_path):
+    """The frame cut at x = 300 px: the markers the border cuts are left out, not taken at a shifted
+    centroid (their edges were 4 to 6 deg off)."""
+    from rodctl.track import track
+    from rodctl.track.calibrate import View
+
+    d = filmed[120]
+    h = cv2.imread(str(d["board"])).shape[0]
+    video = tmp_path / "cut.mp4"
+    cap = cv2.VideoCapture(str(d["video"]))
+    from rodctl.track.render import write_video
+
+    def frames():
+        while True:
+            ok, f = cap.read()
+            if not ok:
+                return
+            yield np.ascontiguousarray(f[:, :300])
+
+    write_video(video, 120, frames(), (300, h))
+    r = track(video, d["log"], None, view=View.from_checkerboard(d["board"], (9, 6), 0.02))
+    ok = np.isfinite(r.theta).all(axis=1)
+    err = wrap_deg(r.theta[ok] - truth_angles(d, d["filming"].log_time(np.arange(r.frames))[ok]))
+    assert np.percentile(np.abs(err), 99.9) <= 3.0, np.percentile(np.abs(err), 99.9)
+
+
+def test_a_truncated_video_is_one_line(filmed, tmp_path):
+    """FFmpeg's own "moov atom not found" stays off stderr: the user sees rodctl's one line."""
+    d = filmed[60]
+    bad = tmp_path / "cut.mp4"
+    bad.write_bytes(d["video"].read_bytes()[:4096])
+    out = tmp_path / "t.parquet"
+    r = run_rodctl("track", str(bad), "--log", str(d["log"]), "--out", str(out), "--quiet", timeout=120)
+    assert r.returncode == 2 and r.stderr.strip().splitlines() == [f"rodctl: video {bad}: OpenCV cannot read it as a video"]
+    assert not out.exists()
+
+
+def test_the_renderer_has_a_help(tmp_path):
+    import subprocess
+    import sys
+
+    from host_tools import rodctl_env
+
+    r = subprocess.run([sys.executable, "-m", "rodctl.track.render", "--help"], cwd=tmp_path, capture_output=True,
+                       text=True, timeout=120, env=rodctl_env())
+    assert r.returncode == 0 and "usage:" in r.stdout and "--fps" in r.stdout
+    assert list(tmp_path.iterdir()) == []  # nothing rendered (it rendered into a folder named --help)

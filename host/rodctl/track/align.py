@@ -4,8 +4,11 @@
 
 found by the normalized cross-correlation of the camera's base angle (the first edge) with the
 encoder's, then a least-squares fit of offset, rate and a constant angle (the camera's roll and
-the encoder's zero) on the log's samples, interpolated. Refused when the best correlation is too
-weak to trust: the video and the log are not of the same run.
+the encoder's zero) on the log's samples, interpolated, over the frames the log covers (the video
+may start before the log or end after it). Refused when the best correlation is too weak to trust
+(the video and the log are not of the same run), or when the fit ends at its limits (a drift of
+MAX_DRIFT_PPM, or the offset at the edge of its search): no clock fits the frames' times (frames
+dropped without a gap in their timestamps, or the wrong lag).
 """
 
 from __future__ import annotations
@@ -20,6 +23,13 @@ MIN_CORRELATION = 0.9  # the fitted base angles must agree this well [-]
 MIN_OVERLAP = 0.5  # share of the video the log must cover at the best lag [-]
 MIN_SWING_DEG = 5.0  # the base must move this much in the video to time it
 MAX_DRIFT_PPM = 5000.0  # camera clocks are good to a few hundred ppm; beyond this the fit is lost
+# Of two lags that fit alike, the one the log covers more of wins, by this much correlation per share
+# of the video outside the log [-]. Small, because a video started before the log (or stopped after
+# it) is right to overlap it partly: r * overlap (0.97 at full overlap beat 0.9999 at 94 %) chose
+# a wrong lag 0.86 s off. A swinging rod is nearly periodic, so a partial overlap can fit well by
+# chance; it has to fit better than the full one by 0.02 per share lost to win.
+OVERLAP_PENALTY = 0.02
+AT_LIMIT = 0.99  # a fitted value this close to its bound is pinned there, not found [-]
 
 
 @dataclass
@@ -61,8 +71,7 @@ def _coarse(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.nda
     cov = sxy - sx * sy / k
     den = np.sqrt(np.maximum(sxx - sx * sx / k, 0.0) * np.maximum(syy - sy * sy / k, 0.0))
     r = np.divide(cov, den, out=np.zeros_like(cov), where=den > 0)
-    # a swinging rod is periodic: of two lags that fit alike, the one the log covers wins
-    score = np.where(k >= need, r * k / n, -np.inf)
+    score = np.where(k >= need, r - OVERLAP_PENALTY * (1.0 - k / n), -np.inf)
     best = int(np.argmax(score))
     return grid[0] + lags[best] * dt - tau[0], float(r[best])
 
@@ -82,17 +91,25 @@ def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarr
         raise InputError(f"the video's base angle does not follow the log's (best correlation {r0:.2f} < "
                          f"{MIN_CORRELATION}): a log of another run?")
 
-    def resid(p):
-        return beta - p[2] - np.interp(p[0] + p[1] * tau, t_log, th_log)
+    inside = _inside(offset0 + tau, t_log, 2.0 / fps)
+    if inside.sum() < 20:
+        raise InputError(f"the log covers only {inside.sum()} usable frames of the video: too few to align them")
+    tau_in, beta_in = tau[inside], beta[inside]
 
-    c0 = float(np.median(beta - np.interp(offset0 + tau, t_log, th_log)))
-    span = 3.0 / fps  # the coarse lag is right to a frame; the rate within MAX_DRIFT_PPM
-    fit_bounds = ([offset0 - span, 1.0 - MAX_DRIFT_PPM * 1e-6, -np.inf],
-                  [offset0 + span, 1.0 + MAX_DRIFT_PPM * 1e-6, np.inf])
+    def resid(p):
+        return beta_in - p[2] - np.interp(p[0] + p[1] * tau_in, t_log, th_log)
+
+    c0 = float(np.median(beta_in - np.interp(offset0 + tau_in, t_log, th_log)))
+    # the coarse lag is right to a frame at rate 1; a drift moves the first frame's time by up to
+    # MAX_DRIFT_PPM of the clip's length from the lag that fits best in its middle
+    span = 3.0 / fps + MAX_DRIFT_PPM * 1e-6 * float(np.ptp(tau))
+    drift_max = MAX_DRIFT_PPM * 1e-6
+    fit_bounds = ([offset0 - span, 1.0 - drift_max, -np.inf], [offset0 + span, 1.0 + drift_max, np.inf])
     fit = least_squares(resid, [offset0, 1.0, c0], x_scale=[1.0 / fps, 1e-4, 0.01], loss="soft_l1",
                         f_scale=np.radians(2.0), bounds=fit_bounds)
     off, rate, c = (float(v) for v in fit.x)
-    inside = (off + rate * tau >= t_log[0]) & (off + rate * tau <= t_log[-1])
+    _refuse_at_limit(off - offset0, span, rate - 1.0, drift_max)
+    inside = _inside(off + rate * tau, t_log, 0.0)
     model = np.interp(off + rate * tau[inside], t_log, th_log) + c
     r = float(np.corrcoef(beta[inside], model)[0, 1]) if inside.sum() > 2 else 0.0
     if r < MIN_CORRELATION:
@@ -100,3 +117,21 @@ def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarr
                          f"{MIN_CORRELATION}): a log of another run?")
     res = float(np.sqrt(np.mean((beta[inside] - model) ** 2)))
     return Alignment(off, rate, c, r, res)
+
+
+def _inside(t: np.ndarray, t_log: np.ndarray, margin_s: float) -> np.ndarray:
+    """The frames whose log times t [s] the log covers, margin_s [s] in from its ends: outside, the
+    log's angle is not known (interpolation would repeat its first or last sample)."""
+    return (t >= t_log[0] + margin_s) & (t <= t_log[-1] - margin_s)
+
+
+def _refuse_at_limit(moved_s: float, span_s: float, drift: float, drift_max: float) -> None:
+    """A fit that ends on its bounds has not found the clock, it has run out of room: the numbers it
+    stops at (e.g. a drift of exactly MAX_DRIFT_PPM) would be printed as if measured."""
+    if abs(drift) >= AT_LIMIT * drift_max:
+        raise InputError(f"the video's clock does not fit the log's: the fitted drift ran into its limit "
+                         f"({drift * 1e6:+.0f} ppm): frames dropped from the video, or a log of another run?")
+    if abs(moved_s) >= AT_LIMIT * span_s:
+        raise InputError(f"the video's clock does not fit the log's: the fitted offset ran into its limit "
+                         f"({moved_s * 1e3:+.1f} ms from the best lag): frames dropped from the video, or a log "
+                         "of another run?")

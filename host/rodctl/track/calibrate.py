@@ -31,7 +31,10 @@ class View:
 
         if not square_m > 0 or not square_m < 1:
             raise InputError(f"--square {square_m!r}: the checkerboard's square side in metres, e.g. 0.02")
-        img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        from rodctl.track.video import quiet_opencv
+
+        with quiet_opencv():  # OpenCV's own "can't open/read file" warning: the line below says it
+            img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
         if img is None:
             raise InputError(f"--calibrate {path}: not an image OpenCV can read")
         found, corners = cv2.findChessboardCorners(img, inner, cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)

@@ -273,8 +273,25 @@ def demo(folder, fps: float = 120.0, seconds: float = 8.0, *, scene: RodScene | 
             "params": p, "lengths": lengths}
 
 
-if __name__ == "__main__":  # python -m rodctl.track.render DIR: the docs' example video
-    import sys
+def main(argv: list[str] | None = None) -> int:
+    """python -m rodctl.track.render [DIR] [--fps F] [--seconds S]: the docs' example video."""
+    import argparse
 
-    out = demo(sys.argv[1] if len(sys.argv) > 1 else "build/track-demo")
+    ap = argparse.ArgumentParser(prog="python -m rodctl.track.render",
+                                 description="Render a simulated filmed run for `rodctl track`: DIR/run.csv (the "
+                                             "telemetry log, and its .truth.csv), DIR/run.mp4 and DIR/board.png (a "
+                                             "9x6 checkerboard, 20 mm squares, in the rod's plane).")
+    ap.add_argument("folder", nargs="?", default="build/track-demo", metavar="DIR",
+                    help="where to write (default build/track-demo)")
+    ap.add_argument("--fps", type=float, default=120.0, help="the camera's frame rate [1/s] (default 120)")
+    ap.add_argument("--seconds", type=float, default=8.0, help="the clip's length [s] (default 8)")
+    args = ap.parse_args(argv)
+    if not 1 <= args.fps <= 1000 or not 1 <= args.seconds <= 600:
+        ap.error("--fps from 1 to 1000, --seconds from 1 to 600")
+    out = demo(args.folder, fps=args.fps, seconds=args.seconds)
     print(f"wrote {out['video']}, {out['log']}, {out['board']}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
