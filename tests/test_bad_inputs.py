@@ -310,3 +310,14 @@ def test_an_early_ctrl_c_of_rodctl_log_is_one_line_and_exit_130(delay, tmp_path)
     assert p.returncode in (130, -signal.SIGINT), err
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("rodctl: interrupted"), err
+
+
+@pytest.mark.parametrize("argv, says", [
+    (("log", "--duration", "abc"), "rodctl log: argument --duration: invalid float value: 'abc'"),
+    (("arm", "--port", "sim://"), "rodctl arm: one of the arguments --swing-up --balance is required"),
+    (("track", "v.mp4", "--markers", "abc"), "rodctl track: argument --markers: invalid int value: 'abc'"),
+])
+def test_a_mistyped_option_is_one_line_pointing_at_help(argv, says):
+    r = run_rodctl(*argv)
+    assert r.returncode == 2
+    assert _one_line(r) == f"{says}; see {says.split(':')[0]} --help"

@@ -14,7 +14,14 @@ def build_parser():
 
     from rodctl import __version__
 
-    parser = argparse.ArgumentParser(
+    class OneLineParser(argparse.ArgumentParser):
+        """argparse's refusals as every other of rodctl's: one line, exit 2 (the usage is behind --help).
+        Subcommand parsers are made of the same class."""
+
+        def error(self, message):
+            self.exit(2, f"{self.prog}: {message}; see {self.prog} --help\n")
+
+    parser = OneLineParser(
         prog="rodctl",
         description="Soft-rod testbed: design gains, build and flash the Teensy, simulate, stream and log telemetry.",
     )

@@ -21,7 +21,7 @@ class ColorRange:
     @classmethod
     def parse(cls, text: str | None) -> "ColorRange":
         """'H1,S1,V1-H2,S2,V2' (OpenCV units: H 0..179, S and V 0..255); None: the default pink."""
-        if not text:
+        if text is None:
             return cls(*DEFAULT_HSV)
         try:
             lo_t, hi_t = text.split("-")
