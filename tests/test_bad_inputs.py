@@ -257,13 +257,17 @@ def test_numbers_out_of_range_are_one_line_before_any_work(argv, start, tmp_path
     assert list(tmp_path.iterdir()) == []
 
 
-def test_a_ctrl_c_while_the_modules_load_is_acted_on_after_they_have(monkeypatch, capsys):
+def test_a_ctrl_c_while_the_modules_load_is_acted_on_after_they_have(monkeypatch, capsys, tmp_path):
     """Raised inside an import, a library's bare `except:` could swallow it and the command would go on to
     arm: while the parser's modules load it is only noted, then the command stops."""
     import os
     import signal
 
     import rodctl.cli as cli
+
+    # what a shell gives rodctl: Python's own Ctrl-C handler (a pytest-xdist worker has another)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    monkeypatch.chdir(tmp_path)  # were it to go on, its log lands here
 
     real = cli.build_parser
 
@@ -275,6 +279,7 @@ def test_a_ctrl_c_while_the_modules_load_is_acted_on_after_they_have(monkeypatch
     assert cli.main(["log", "--port", "sim://", "--arm", "swing-up", "--duration", "1"]) == 130
     assert capsys.readouterr().err == "rodctl: interrupted\n"
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # main() leaves Python's own behind
+    signal.signal(signal.SIGINT, previous)
 
 
 def test_ctrl_c_anywhere_is_one_line_and_exit_130(monkeypatch, capsys):

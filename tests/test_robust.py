@@ -438,7 +438,7 @@ class _ScriptedRunner:
     """Rows without simulations: every run passes except, when `slow`, the nominal (strict) ones."""
 
     def __init__(self, slow: bool):
-        self.slow, self.ran = slow, []
+        self.slow, self.ran, self.gearbox = slow, [], []
 
     def run(self, units, on_row=None, show=None):
         rows = []
@@ -448,6 +448,7 @@ class _ScriptedRunner:
             rows.append({"case": u.case.name, "task": u.task, "passed": ok, "settle_s": 3.0 if not ok else 0.5,
                          "max_dev_deg": 30.0, "peak_torque_Nm": 0.2})
             self.ran.append((u.case.name, u.task))
+            self.gearbox.append(json.loads(u.params_json)["gearbox"]["model"])
         return rows
 
 
@@ -466,12 +467,13 @@ def test_tune_goals_cut_a_slow_candidate_short_and_never_pick_it():
     slow = _ScriptedRunner(slow=True)
     r = T.evaluate(p, slow, make, goals=True)
     assert sorted(slow.ran) == [("nominal", "balance"), ("nominal", "swingup")]  # cut after the gate
+    assert slow.gearbox == ["rigid", "rigid"]  # the goals judged with an ideal gearbox: the play's lean is not the gains
     # 1 per missed run + how far past its goal, in goal units: (1 + 1.5 s / 1.5 s) + (1 + 1 s / 2 s)
     assert r["objective"] == 0.0 and r["violation"] == pytest.approx(3.5)
     assert r["missed_goals"] == ["nominal/balance", "nominal/swingup"]
     fast = _ScriptedRunner(slow=False)
     r = T.evaluate(p, fast, make, goals=True)
-    assert len(fast.ran) == len(make(p)) and r["violation"] == 0.0 and r["score"] == 1.0
+    assert len(fast.ran) == len(make(p)) + 2 and r["violation"] == 0.0 and r["score"] == 1.0  # the gate's not scored
     no_goals = _ScriptedRunner(slow=True)
     r = T.evaluate(p, no_goals, make, goals=False)  # --no-goals: every run, the slow ones count as fails
     assert len(no_goals.ran) == len(make(p)) and r["passed"] == len(make(p)) - 2

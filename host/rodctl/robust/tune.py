@@ -14,8 +14,9 @@ A candidate that the parameter checks reject, or whose design the generator refu
 Nominal goals (`goals=True`, the default of `rodctl tune`): a design that is robust but slow is no
 default, so the nominal case's strict runs (issue 8's goals: balance settled to 1 deg by 1.5 s,
 swing-up caught by 5 s and settled 2 s after the catch) are a constraint, not two runs among many.
-They run first; a candidate that misses one is infeasible and skips the rest of its runs (about
-thirty times cheaper). Optuna's TPE takes the violation (how far past the goals, summed) through
+They are judged with an ideal gearbox (`gate_params`: the play's lean would fail every trial) and run
+first; a candidate that misses one is infeasible and skips the rest of its runs (about thirty times
+cheaper). Optuna's TPE takes the violation (how far past the goals, summed) through
 `Trial.set_constraint`, and the best trial is the best feasible one.
 """
 
@@ -183,10 +184,20 @@ def goal_violation(row: dict) -> float:
     return 1.0 + min(max(settle - goal, 0.0) / goal, 5.0)
 
 
+def gate_params(params: Params) -> Params:
+    """The plant the nominal goals are judged on: params' own with an ideal gearbox. With the gearbox's play
+    the rod rests on a flank 2 to 2.5 deg off upright whatever the gains (docs/control.md), so no trial
+    would meet the 1 deg goals; the goals are about the design's speed, which the play swamps. The scored
+    runs keep the play."""
+    from rodctl.sim.matrix import IDEAL_GEARBOX
+
+    return params.with_overrides(*IDEAL_GEARBOX)
+
+
 def evaluate(params: Params, runner, make_units: Callable[[Params], list], on_row=None, goals: bool = False) -> dict:
     """Score one candidate: {'objective', 'score', 'passed', 'runs', 'margin', 'violation', 'refused'}.
-    A refusal scores 0. goals: the nominal (strict) runs go first and a miss ends the trial (module
-    docstring); its objective is then 0 and 'violation' > 0."""
+    A refusal scores 0. goals: the nominal (strict) runs on `gate_params` go first and a miss ends the
+    trial (module docstring); its objective is then 0 and 'violation' > 0. They are not scored."""
     from rodctl.build.sil_build import build_sil
     from rodctl.robust import score as S
 
@@ -195,15 +206,14 @@ def evaluate(params: Params, runner, make_units: Callable[[Params], list], on_ro
         build_sil(params)  # design + compile once, here, before the runs fan out
     except DesignRefused as e:
         return {**empty, "violation": 6.0 if goals else 0.0, "refused": str(e)}
-    units = make_units(params)
-    gate = [u for u in units if goals and getattr(u.case, "strict", False)]
-    rest = [u for u in units if u not in gate]
+    rest = make_units(params)
+    gate = [u for u in make_units(gate_params(params)) if getattr(u.case, "strict", False)] if goals else []
     gate_rows = runner.run(gate, on_row=on_row, show=False) if gate else []
     miss = sum(goal_violation(r) for r in gate_rows)
     if miss > 0:
         return {**empty, "violation": miss, "refused": "",
                 "missed_goals": [f"{r['case']}/{r['task']}" for r in gate_rows if not r.get("passed")]}
-    rows = gate_rows + runner.run(rest, on_row=on_row, show=False)
+    rows = runner.run(rest, on_row=on_row, show=False)
     sc = S.score(rows, params)
     return {**sc.to_json(), "violation": 0.0, "refused": ""}
 
@@ -356,7 +366,7 @@ def tuned_file(params: Params, summary: dict, dims: tuple[Dim, ...], reproduce: 
         ]
     if goals:
         lines.append("# Constraint: the nominal goals of the faithful-rod scenarios (balance within 1 deg by 1.5 s, swing-up "
-                     "caught by 5 s and settled 2 s after the catch)" + ("" if met else ": NOT MET by any trial"))
+                     "caught by 5 s and settled 2 s after the catch), judged with an ideal gearbox" + ("" if met else ": NOT MET by any trial"))
     lines.append("# Searched (everything else is the starting point's):")
     for d in dims:
         sec, key = d.name.split(".")
