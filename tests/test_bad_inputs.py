@@ -326,3 +326,13 @@ def test_a_mistyped_option_is_one_line_pointing_at_help(argv, says):
     r = run_rodctl(*argv)
     assert r.returncode == 2
     assert _one_line(r) == f"{says}; see {says.split(':')[0]} --help"
+
+
+def test_a_parameter_file_given_as_a_log_is_not_called_an_old_log(tmp_path):
+    """A TOML file starts with a comment, as an old rodctl-log 1 CSV did: only a header with seq_count after the
+    comments makes it one."""
+    f = tmp_path / "full.toml"
+    f.write_text("# a parameter file\n[rod]\nlength = 0.16\n")
+    r = run_rodctl("plot", str(f), "--out", str(tmp_path / "x.png"))
+    assert r.returncode == 2 and _one_line(r) == f"rodctl: {f}: not a rodctl log (CSV, Parquet or MCAP)"
+    assert not (tmp_path / "x.png").exists()

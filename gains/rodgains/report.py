@@ -150,7 +150,7 @@ def report_text(d: Design) -> str:
         "",
         f"Sampled design ({d.method}, ZOH at {rate:g} Hz, {d.observer_form}-estimate observer):",
         f"  K = [{', '.join(f'{v:.4g}' for v in d.K.ravel())}]  N m per rad, rad/s",
-        f"  L = [{', '.join(f'{v:.4g}' for v in d.L.ravel())}]",
+        f"  L = [{', '.join(f'{v:.4g}' for v in d.L.ravel())}]  rad, rad/s per rad of encoder innovation",
         f"  controller poles (slowest, as ln z / dt): {_poles(ctrl, d.dt)} rad/s",
         f"  observer poles   (slowest, as ln z / dt): {_poles(obs, d.dt)} rad/s",
         f"  closed-loop spectral radius (plant + observer + LQR): {d.checks['closed_loop_spectral_radius']:.6f}",

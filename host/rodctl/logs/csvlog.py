@@ -202,8 +202,12 @@ def read(path: Path, names: list[str] | None):
 
 
 def is_csv_header(first: bytes) -> bool:
+    """A rodctl CSV log's first bytes: its header, or an old rodctl-log 1 CSV's metadata comments (a header
+    with seq_count follows them; any other file that starts with a comment, a TOML file, is not a log)."""
     line = first.split(b"\n", 1)[0]
-    return b"seq_count" in line and b"time_s" in line or line.startswith(b"#")
+    if line.startswith(b"#"):
+        return b"seq_count" in first and b"time_s" in first
+    return b"seq_count" in line and b"time_s" in line
 
 
 def empty_events() -> np.ndarray:
