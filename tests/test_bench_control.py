@@ -67,3 +67,15 @@ def test_control_quick_skips_the_matrix_and_the_longest_rod(monkeypatch):
     assert set(got) == {"nominal_balance_settle_s", "nominal_balance_final_deg", "nominal_swingup_catch_s",
                         "nominal_swingup_settle_s", "nominal_swingup_final_deg", "balanced_torque_rms_mNm"}
     assert got["nominal_balance_settle_s"] == float("inf")  # never settled reads as a miss, not a crash
+
+
+def test_an_existing_json_is_refused_before_measuring_unless_forced(monkeypatch, tmp_path, capsys):
+    measured = []
+    monkeypatch.setattr(M, "run_case", lambda *a, **kw: measured.append(a) or _fake_run_case(0.8, 0.015)(*a, **kw))
+    out = tmp_path / "bench.json"
+    out.write_text("{}\n")
+    assert main(["bench", "--only", "control", "--quick", "--json", str(out)]) == 2
+    assert capsys.readouterr().err.strip() == f"rodctl: --json {out} exists; pass --force to overwrite"
+    assert measured == [] and out.read_text() == "{}\n"
+    assert main(["bench", "--only", "control", "--quick", "--json", str(out), "--force"]) == 0
+    assert json.loads(out.read_text())["nominal_balance_final_deg"] == 0.8 and measured

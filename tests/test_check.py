@@ -147,6 +147,17 @@ def test_json_into_a_missing_folder_is_refused_before_the_board_is_touched(tmp_p
     assert r.returncode == 2 and "does not exist" in r.stderr and r.stdout == ""
 
 
+def test_an_existing_json_is_kept_unless_forced_and_refused_before_the_board_is_touched(tmp_path):
+    """A check's record (the rig's measured signs and gains) is never replaced silently."""
+    out = tmp_path / "c.json"
+    out.write_text("{}\n")
+    r = run_rodctl("check", "--port", "sim://", "--json", str(out), timeout=60)
+    assert r.returncode == 2 and r.stderr.strip() == f"rodctl: --json {out} exists; pass --force to overwrite"
+    assert r.stdout == "" and out.read_text() == "{}\n"
+    r, lines = check("sim://", "--json", str(out), "--force")
+    assert r.returncode == 0 and "results" in json.loads(out.read_text())
+
+
 def test_a_board_that_does_not_answer_exits_1_with_one_line():
     master, slave = pty.openpty()  # a port that exists, with nothing behind it
     try:

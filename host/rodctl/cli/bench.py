@@ -133,7 +133,7 @@ def run_bench(args) -> int:
     if args.json:
         from rodctl.cli.outputs import check_output
 
-        check_output(args.json, "--json")  # before the measurements, not after them
+        check_output(args.json, "--json", force=args.force)  # before the measurements, not after them
     results = {}
     for g in GROUPS:
         if g in groups:
@@ -162,6 +162,7 @@ def register(sub) -> None:
                                    "counts come from QEMU (../shared/tools/m4-icount.sh); speeds are medians of "
                                    "repeated runs. Exit 1 when a goal is missed.")
     b.add_argument("--json", metavar="PATH", help="write the results as JSON")
+    b.add_argument("--force", action="store_true", help="replace an existing --json")
     b.add_argument("--only", metavar="GROUPS", help="comma-separated subset of: " + ", ".join(GROUPS))
     b.add_argument("--quick", action="store_true", help="shorter runs (noisier)")
     b.set_defaults(func=run_bench)

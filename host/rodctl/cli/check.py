@@ -50,7 +50,7 @@ def run_check_command(args) -> int:
     from rodctl.check.user import VirtualHand, user_for
 
     if args.json:
-        check_output(args.json, "--json")
+        check_output(args.json, "--json", force=args.force)
     params, label, flash = _design(args)
     say = lambda text: print(f"  {text}", file=sys.stderr, flush=True)  # noqa: E731
     show = lambda r: print(r.line(), flush=True)  # noqa: E731
@@ -91,4 +91,6 @@ def register(sub) -> None:
                    help="afterwards, store the encoder and motor signs the check measured wrong on the board "
                         "(its EEPROM; asked first unless --yes), so no reflash is needed")
     p.add_argument("--json", metavar="PATH", help="also write every step's result and numbers as JSON")
+    p.add_argument("--force", action="store_true", help="replace an existing --json (a check's record is never "
+                                                        "replaced silently)")
     p.set_defaults(func=run_check_command)

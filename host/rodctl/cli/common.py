@@ -161,6 +161,15 @@ def stop_signals():
             signal.signal(sig, h)
 
 
+def ctrl_c_watch():
+    """A test that says whether a Ctrl-C came since this call. main() counts every SIGINT, so one that a
+    library swallowed (a bare `except:` around an import) still keeps a command from arming."""
+    from rodctl.cli import interrupts
+
+    start = interrupts()
+    return lambda: interrupts() != start
+
+
 @contextlib.contextmanager
 def no_interrupts():
     """Let cleanup finish: a second Ctrl-C (or SIGTERM) waits until the block is done."""

@@ -8,7 +8,8 @@ import time
 from rodgains.errors import UserError
 
 from rodctl.cli.common import (ARM_CHOICES, RateMeter, StatusLine, add_design_args, add_port_arg, check_duration,
-                               default_log_name, design_params, no_interrupts, session_for, status_text, stop_signals)
+                               ctrl_c_watch, default_log_name, design_params, no_interrupts, session_for,
+                               status_text, stop_signals)
 from rodctl.link import protocol as P
 from rodctl.link.session import Session, name_of
 
@@ -18,9 +19,7 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
     from rodctl.logs.metadata import device_metadata
     from rodctl.logs.writer import LogWriter, check_new, log_format, require_format
 
-    from rodctl.cli import interrupts
-
-    interrupts_at_start = interrupts()
+    ctrl_c_seen = ctrl_c_watch()
     duration = getattr(args, "duration", None)
     check_duration(duration)
     fmt = None
@@ -55,7 +54,7 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
                   f"{1e6 / h.period_us:g} Hz, {design}); Ctrl-C stops" + (" and disarms" if arm_mode else ""),
                   file=sys.stderr, flush=True)
             if arm_mode is not None:
-                if interrupts() != interrupts_at_start:  # a Ctrl-C that something swallowed: never arm after it
+                if ctrl_c_seen():  # a Ctrl-C that something swallowed: never arm after it
                     raise KeyboardInterrupt
                 ack = session.arm(arm_mode)
                 print(f"armed {arm_mode.name.lower().replace('_', '-')}: mode {name_of(P.Mode, ack.mode)}",

@@ -325,9 +325,9 @@ END_GRACE_S = 3.0  # the window should be gone this long after the scope ends; e
 def run_scope(args) -> int:
     from rodctl.cli.plot import display_problem
 
-    from rodctl.cli import interrupts
+    from rodctl.cli.common import ctrl_c_watch, design_params, session_for
 
-    interrupts_at_start = interrupts()
+    ctrl_c_seen = ctrl_c_watch()
     check_scope_args(args)
     why = display_problem()
     if why is not None:
@@ -336,7 +336,6 @@ def run_scope(args) -> int:
                         "`rodctl plot run.csv --out run.png`")
     import matplotlib.pyplot as plt
 
-    from rodctl.cli.common import design_params, session_for
     from rodctl.logs.metadata import overrides_of
 
     stop = threading.Event()
@@ -370,7 +369,7 @@ def run_scope(args) -> int:
                           title=title)
             if args.record:
                 scope.toggle_recording()
-            if interrupts() != interrupts_at_start:  # a Ctrl-C that something swallowed: end, never arm
+            if ctrl_c_seen():  # a Ctrl-C that something swallowed: end, never arm
                 stop.set()
             if args.arm and not stop.is_set():
                 scope.action(args.arm)

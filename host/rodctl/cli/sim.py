@@ -111,7 +111,7 @@ def run_one(args, name: str, params, all_mode: bool = False):
     scen = SCENARIOS[name]
     plot, log = _outputs(args, name, all_mode)
     for path, flag, figure in ((plot, "--figures" if all_mode else "--plot", True), (log, "--log", False)):
-        if path is not None:  # before the run: the name, then the folder (made), then that it can be written
+        if path is not None:  # before the run: the name, then the folder (made and checked writable)
             check_name(path, flag, figure=figure)
             if not figure:
                 from rodctl.logs.writer import log_format
@@ -121,7 +121,6 @@ def run_one(args, name: str, params, all_mode: bool = False):
                 except InputError as e:
                     raise InputError(f"{flag} {e}") from None
             make_folder(path.parent, f"{flag} {path}")
-            check_output(path, flag, figure=figure)
     if log is not None and args.log and not args.force:  # an explicit --log is never replaced silently
         from rodctl.logs.writer import check_new
 
