@@ -271,6 +271,21 @@ def test_with_the_imu_and_play_a_small_lean_keeps_one_flank_loaded_and_the_rod_s
     assert peak0 >= 4.0  # measured 2.57 / 6.27 deg: a crossing every few seconds
 
 
+@pytest.mark.parametrize("rig", [("gearbox.backlash_deg=0",), ('encoder.location="output"',)],
+                         ids=["no play", "encoder on the output shaft"])
+def test_with_the_imu_a_rig_whose_encoder_sees_no_play_is_held_upright_not_leaning(imu_params, rig):
+    """The lean only keeps a flank of the play loaded. A rig file without play between the encoder and the rod
+    designs no lean, and its rod ends nearer upright than the lean would hold it."""
+    from rodgains.design import design
+
+    own = imu_params.with_overrides(*rig)
+    assert design(own).flank_feedforward() == 0.0 and design(imu_params).flank_feedforward() > 0.1
+    mean, peak = _late_deviation_deg(own)
+    assert mean <= 0.8 and peak <= 2.0  # measured 0.34 / 0.92 deg without play, 0.48 / 1.28 on the output shaft
+    mean1, _ = _late_deviation_deg(own.with_overrides("lqr.imu_lean_from_play_deg=0"))  # the lean forced on
+    assert mean1 >= 1.0  # measured 1.29 and 1.28 deg: the design model's 1.36 deg
+
+
 def test_with_the_imu_a_design_for_the_rod_holds_it_at_0_99_of_its_buckling_length_where_the_file_s_hunts(imu_params):
     """Issue 35's rod 15 % softer: 0.99 x its clamped buckling length, with 1 deg of play. The nominal file's design
     trusts a slow mode several times stiffer than the rod's and the rod hunts far past the band; the design made

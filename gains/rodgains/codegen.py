@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .design import Design
+from .design import Design, lean_torque
 from .trim import trim_gains
 
 # Bump when the macro set or its meaning changes; firmware/src/core/rod_config.h checks it.
@@ -85,8 +85,8 @@ def _imu_tables(d: Design) -> list[str]:
         f"#define ROD_IMU_CA_INIT {_matrix(im.CA)}",
         f"#define ROD_IMU_DY_INIT {_vector(im.DY)}",
         f"#define ROD_IMU_FLANK_FF_NM {f32(d.flank_feedforward())}  /* added to the balance torque, ramped in over "
-        f"ROD_IMU_FLANK_RAMP_STEPS: the rod held leaning so that gravity takes {d.params['lqr']['imu_flank_torque'] * 1e3:g} "
-        "mN m at the base (lqr.imu_flank_torque) [N m] */",
+        f"ROD_IMU_FLANK_RAMP_STEPS: the rod held leaning so that gravity takes {lean_torque(d.params) * 1e3:g} "
+        "mN m at the base (lqr.imu_flank_torque, where the play reaches lqr.imu_lean_from_play_deg) [N m] */",
         f"#define ROD_IMU_FLANK_RAMP_STEPS {round(FLANK_RAMP_S / d.dt)}  /* {FLANK_RAMP_S:g} s, slower than the balance */",
     ]
 

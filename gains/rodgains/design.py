@@ -49,6 +49,18 @@ def continuous_gains(A, B, C, Q, R, W, V) -> tuple[np.ndarray, np.ndarray]:
     return K, L
 
 
+def lean_torque(p: Params) -> float:
+    """The steady base torque the tip IMU's balance holds the rod leaning by [N m]: lqr.imu_flank_torque
+    where the file's rig has play between the encoder and the rod (gearbox.backlash_deg, encoder on the
+    motor) from lqr.imu_lean_from_play_deg on, else 0, upright. The lean keeps one flank loaded so the
+    motor never crosses the gap; with less play the crossing costs less than the lean. Measured
+    (docs/sensors.md, "The gearbox's play"): upright without play 0.34 / 0.96 deg median mean / peak
+    against 1.30 / 2.11 leaning; upright's peak grows with the play and meets the lean's at 0.3 to 0.35 deg."""
+    g, enc = p["gearbox"], p["encoder"]
+    play = g["backlash_deg"] if g["model"] == "compliant" and enc["location"] == "motor" else 0.0
+    return p["lqr"]["imu_flank_torque"] if play >= p["lqr"]["imu_lean_from_play_deg"] else 0.0
+
+
 class StateSpaces(NamedTuple):
     """python-control models of a Design (see Design.to_statespace)."""
 
@@ -126,11 +138,11 @@ class Design:
 
     def flank_feedforward(self) -> float:
         """With the tip IMU: the constant added to u = -K z - w that holds the design model at the lean where
-        gravity takes lqr.imu_flank_torque (tau0) at the base, the gearbox then always on one flank [N m]:
+        gravity takes lean_torque(params) (tau0) at the base, the gearbox then always on one flank [N m]:
         the static equilibrium z_ref = -A^-1 B tau0 and u = tau0 - K (z - z_ref); 0 base-only."""
         if self.imu is None:
             return 0.0
-        tau0 = self.params["lqr"]["imu_flank_torque"]
+        tau0 = lean_torque(self.params)
         z_ref = -np.linalg.solve(self.A, self.B) * tau0
         return float(tau0 - (self.K @ z_ref)[0, 0])
 

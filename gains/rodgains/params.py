@@ -178,6 +178,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "r_torque": Key(float, "1/(N m)^2", _positive),
         "r_torque_rate": Key(float, "s^2/(N m)^2", _nonneg, default=0.0),
         "imu_flank_torque": Key(float, "N m", _between(0.0, 0.01), default=0.001),
+        # with sensors.tip_imu: the gearbox play between the encoder and the rod from which the rod is held leaning
+        "imu_lean_from_play_deg": Key(float, "deg", _between(0.0, 10.0), default=0.3),
         "friction_compensation": Key(float, "N m", _nonneg),
     },
     "observer": {
