@@ -225,6 +225,52 @@ def test_dropped_frames_are_refused_not_fitted(filmed, tmp_path):
     assert "ran into its limit" in r.stderr and not out.exists() and not out.with_suffix(".mcap").exists()
 
 
+def rewrite_timed(src, dst, keep):
+    """dst: src's frames that `keep` keeps, each stamped in the container with its own time (a camera that left
+    frames out and said so, as a phone's variable frame rate does), encoded again with FFmpeg's mpeg4 (PyAV)."""
+    import fractions
+
+    av = pytest.importorskip("av")
+    cap = cv2.VideoCapture(str(src))
+    fps = cap.get(cv2.CAP_PROP_FPS)
+    tick = fractions.Fraction(1, 12_000)  # 100 ticks a frame at 120 fps (MPEG-4 part 2 allows 65535 a second)
+    with av.open(str(dst), "w") as out:
+        s = out.add_stream("mpeg4", rate=round(fps))
+        s.width, s.height = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+        s.pix_fmt = "yuv420p"
+        s.time_base = s.codec_context.time_base = tick
+        s.bit_rate = 20_000_000
+        k = 0
+        while True:
+            ok, f = cap.read()
+            if not ok:
+                break
+            if keep(k):
+                frame = av.VideoFrame.from_ndarray(f, format="bgr24")
+                frame.pts, frame.time_base = round(k / fps / tick), tick
+                out.mux(s.encode(frame))
+            k += 1
+        out.mux(s.encode())
+    cap.release()
+    return dst
+
+
+def test_frames_left_out_with_their_timestamps_are_timed_by_the_container(filmed, tracked, tmp_path):
+    """The same 10 frames of 720 left out, but the container keeps each frame's own time (a real variable-rate
+    file): the frames are timed by it, the clock fits as on the whole clip, and the warning says why."""
+    from rodctl.track import track
+
+    d = filmed[120]
+    drop = {60, 130, 200, 270, 340, 410, 480, 550, 620, 690}
+    video = rewrite_timed(d["video"], tmp_path / "vfr.mp4", keep=lambda k: k not in drop)
+    r = track(video, d["log"], None, say=None)
+    assert any("uneven frame timing (10 of 709 intervals" in w for w in r.warnings), r.warnings
+    f, a = d["filming"], r.alignment
+    assert abs(a.offset_s - f.offset_s) <= 1.0 / 120, a
+    assert abs(a.drift_ppm - f.drift_ppm) <= DRIFT_PPM, a
+    assert abs(a.drift_ppm - tracked[120].alignment.drift_ppm) <= 20.0  # the whole clip's fit
+
+
 def test_a_rolled_camera_without_calibration_is_levelled(filmed, tmp_path):
     """The camera rolled 10 deg, no --calibrate: the roll the alignment measures is taken off every angle
     (it was left in: every edge 9 to 10 deg off)."""
