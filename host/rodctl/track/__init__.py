@@ -22,8 +22,8 @@ from rodgains.errors import InputError
 from rodctl.track.align import Alignment, align
 from rodctl.track.compare import error_table, estimate_at, on_branch, settle_time
 from rodctl.track.markers import ColorRange, Detector
-from rodctl.track.shape import (FILLED, GOOD, REPEATED, UNUSABLE, base_tangent, edge_angles, find_hub, place, rod_length_px,
-                                rod_markers, to_world)
+from rodctl.track.shape import (FILLED, GOOD, REPEATED, UNUSABLE, base_tangent, edge_angles, find_hub, place,
+                                rod_length_px, rod_markers, static_spots, stray_spots, to_world, without_strays)
 from rodctl.track.video import Video
 
 REPEAT_SHARE = 0.3  # markers moving less than this share of the step the motion around them predicts: a repeat
@@ -137,13 +137,15 @@ def within_reach(dets: list[np.ndarray], hub_px: np.ndarray, reach_px: float) ->
     return [d[np.hypot(*(d - hub_px).T) <= reach_px] if len(d) else d for d in dets]
 
 
-def place_all(dets: list[np.ndarray], hub_px: np.ndarray, markers: int, spacing_px: float):
+def place_all(dets: list[np.ndarray], hub_px: np.ndarray, markers: int, spacing_px: float, spots=None):
     """(positions [px] (frames, markers + 1, 2), NaN where not seen; quality per frame)."""
     F = len(dets)
     pos_px = np.full((F, markers + 1, 2), np.nan)
     quality = np.full(F, UNUSABLE, np.int8)
+    strays = stray_spots(dets, hub_px, markers, spacing_px, spots)
     for k, d in enumerate(dets):
-        pos, q = place(rod_markers(d, hub_px), hub_px, markers, spacing_px)
+        d = without_strays(d, strays, spacing_px)
+        pos, q = place(rod_markers(d, hub_px, markers, spacing_px), hub_px, markers, spacing_px)
         quality[k] = q
         if q != UNUSABLE:
             pos_px[k] = pos
@@ -235,16 +237,17 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
         raise InputError(f"{video_path}: no markers of the color {detector.lo.tolist()}..{detector.hi.tolist()} "
                          f"(HSV) in most frames (median {np.median(counts) if len(dets) else 0:g} per frame): "
                          "is this a video of the rod? set the markers' color with --color")
-    hub_px = np.asarray(hub, float) if hub is not None else find_hub(dets)
+    spots = static_spots(dets)
+    hub_px = np.asarray(hub, float) if hub is not None else find_hub(dets, spots=spots)
     if hub_px is None:
         raise InputError(f"{video_path}: no marker holds still on the motor axis: give the axis with --hub X,Y [px]")
-    length_px = length / float(scale) if scale is not None else rod_length_px(dets, hub_px, markers)
+    length_px = length / float(scale) if scale is not None else rod_length_px(dets, hub_px, markers, spots)
     m_per_px = length / length_px
     dets = within_reach(dets, hub_px, REACH_SHARE * length_px)
     spacing_px = length_px / markers
 
     F = len(dets)
-    pos_px, quality = place_all(dets, hub_px, markers, spacing_px)
+    pos_px, quality = place_all(dets, hub_px, markers, spacing_px, spots)
     flag_repeats(pos_px, quality, same)
     if view is not None:
         markers_m, m_per_px = to_plane(pos_px, hub_px, view)

@@ -21,28 +21,51 @@ QUALITY_TEXT = {GOOD: "every marker seen", FILLED: "a marker filled in from its 
 HUB_TOL_PX = 3.0  # a marker this close to the same place in most frames is the hub's
 
 
-def find_hub(dets: list[np.ndarray], share: float = 0.8) -> np.ndarray | None:
-    """The image point [px] where a marker sits in at least `share` of the frames (the axis), or None."""
+def static_spots(dets: list[np.ndarray], share: float = 0.8) -> list[tuple[np.ndarray, float]]:
+    """The image points [px] where a blob sits in at least `share` of the frames, with that share: the
+    axis's marker, and anything else of the markers' colour that does not move (a sticker, a cable tie)."""
     step = max(1, len(dets) // 400)
     sample = [d for d in dets[::step]]
-    if not sample:
-        return None
     pts = [(i, p) for i, d in enumerate(sample) for p in d]
     if not pts:
-        return None
+        return []
     frames = np.array([i for i, _ in pts])
     xy = np.array([p for _, p in pts])
     cells = np.floor(xy / HUB_TOL_PX).astype(np.int64)
     keys = cells[:, 0] * 1_000_003 + cells[:, 1]
-    best, best_n = None, 0
+    found: list[tuple[np.ndarray, float]] = []
     for key in np.unique(keys):
         sel = keys == key
         c = xy[sel].mean(axis=0)
         near = np.linalg.norm(xy - c, axis=1) <= HUB_TOL_PX
         n = len(np.unique(frames[near]))
-        if n > best_n:
-            best, best_n = xy[near].mean(axis=0), n
-    return best if best_n >= share * len(sample) else None
+        spot = xy[near].mean(axis=0)
+        if n >= share * len(sample) and all(np.linalg.norm(spot - q) > HUB_TOL_PX for q, _ in found):
+            found.append((spot, n / len(sample)))
+    return found
+
+
+def find_hub(dets: list[np.ndarray], share: float = 0.8, spots=None) -> np.ndarray | None:
+    """The image point [px] of the axis's marker, or None: a blob that holds still in at least `share` of
+    the frames. Of several, the one the rod turns about: its nearest moving blob (the first marker, on the
+    shaft) keeps its distance, where from a still object elsewhere the nearest blob comes and goes.
+    spots: static_spots(dets, share) when already found."""
+    spots = static_spots(dets, share) if spots is None else spots
+    if len(spots) <= 1:
+        return spots[0][0] if spots else None
+    step = max(1, len(dets) // 400)
+    still = [c for c, _ in spots]
+
+    def spread(c: np.ndarray) -> float:
+        near = []
+        for d in dets[::step]:
+            for q in still:  # only what moves: the rod's markers
+                d = d[np.hypot(*(d - q).T) > 2 * HUB_TOL_PX] if len(d) else d
+            if len(d):
+                near.append(np.hypot(*(d - c).T).min())
+        return float(np.std(near) / np.median(near)) if len(near) >= 3 else np.inf
+
+    return min((c for c, _ in spots), key=spread)
 
 
 def order_from_hub(points: np.ndarray, hub: np.ndarray) -> np.ndarray:
@@ -57,12 +80,116 @@ def order_from_hub(points: np.ndarray, hub: np.ndarray) -> np.ndarray:
     return points[out]
 
 
-def rod_markers(frame_dets: np.ndarray, hub: np.ndarray) -> np.ndarray:
-    """This frame's markers on the rod, ordered from the hub (the hub's own marker left out)."""
+def rod_markers(frame_dets: np.ndarray, hub: np.ndarray, markers: int | None = None,
+                spacing_px: float | None = None) -> np.ndarray:
+    """This frame's markers on the rod, ordered from the hub (the hub's own marker left out): with the markers'
+    spacing known, the chain that fits it best (spaced_chain), so that something else of the markers' colour
+    within the rod's reach is left out; without, each next the nearest."""
     if not len(frame_dets):
         return frame_dets
-    away = np.linalg.norm(frame_dets - hub, axis=1) > 2 * HUB_TOL_PX
-    return order_from_hub(frame_dets[away], hub)
+    away = frame_dets[np.linalg.norm(frame_dets - hub, axis=1) > 2 * HUB_TOL_PX]
+    nearest = order_from_hub(away, hub)
+    if markers is None or spacing_px is None or len(away) < 2:
+        return nearest
+    links = np.hypot(*np.diff(np.vstack([hub, nearest]), axis=0).T) / spacing_px
+    if len(away) <= markers and np.all(np.abs(links - 1.0) <= EVEN_LINK):
+        return nearest  # evenly spaced already: the search would find the same chain
+    return spaced_chain(away, hub, markers, spacing_px)
+
+
+EVEN_LINK = 0.3  # a chain whose every link is within this share of the spacing needs no search [-]
+SKIP_COST = 0.25  # a hidden marker costs what a link half a spacing off does [-]
+MAX_TURN_COS = 0.0  # a chain never turns back by more than 90 deg from one link to the next
+
+
+def spaced_chain(points: np.ndarray, hub: np.ndarray, markers: int, spacing_px: float) -> np.ndarray:
+    """The chain from the hub through `points` [px] that fits markers spaced spacing_px along the rod best:
+    each link one spacing long (two or three across hidden markers), a hidden marker costing SKIP_COST, no link
+    turning back on the last. Dynamic programming over (marker index, this point, the previous one); the
+    points left out are not on the rod."""
+    n = len(points)
+    nodes = np.vstack([hub, points])  # node 0 is the hub
+    diff = nodes[None, :, :] - nodes[:, None, :]  # diff[a, b] = b - a
+    dist = np.hypot(diff[..., 0], diff[..., 1])
+    unit = diff / np.maximum(dist, 1e-9)[..., None]
+    # turn_ok[k, j, l]: the link j->l does not turn back on k->j
+    turn_ok = np.einsum("kjc,jlc->kjl", unit, unit) > MAX_TURN_COS
+    inf = np.inf
+    # cost[i][k, j]: the best chain whose marker i is node j, reached from node k
+    cost = np.full((markers + 1, n + 1, n + 1), inf)
+    back = np.full((markers + 1, n + 1, n + 1, 2), -1, np.int64)  # (index, node) of k's state
+    for j in range(1, n + 1):
+        for m in (1, 2, 3):
+            if m <= markers:
+                c = ((dist[0, j] - m * spacing_px) / spacing_px) ** 2 + SKIP_COST * (m - 1)
+                if c < cost[m, 0, j]:
+                    cost[m, 0, j] = c
+    for i in range(1, markers):
+        for m in (1, 2, 3):
+            i2 = i + m
+            if i2 > markers:
+                continue
+            step = ((dist - m * spacing_px) / spacing_px) ** 2 + SKIP_COST * (m - 1)  # [j, l]
+            # total[k, j, l] = cost[i][k, j] + step[j, l], where the turn is allowed and l is new
+            total = cost[i][:, :, None] + step[None, :, :]
+            total = np.where(turn_ok, total, inf)
+            idx = np.arange(n + 1)
+            total[:, :, 0] = inf  # never back to the hub
+            total[idx, :, idx] = inf  # never back to the previous node
+            total[:, idx, idx] = inf
+            best_k = np.argmin(total, axis=0)  # [j, l]
+            best = np.take_along_axis(total, best_k[None], axis=0)[0]
+            better = best < cost[i2]
+            cost[i2] = np.where(better, best, cost[i2])
+            back[i2][better] = np.stack([np.full_like(best_k, i), best_k], axis=-1)[better]
+    # the end: the tip's marker, or an earlier one with the rest hidden
+    ends = [(cost[i].min() + SKIP_COST * (markers - i), i) for i in range(1, markers + 1) if np.isfinite(cost[i].min())]
+    if not ends:
+        return order_from_hub(points, hub)
+    _, i = min(ends)
+    k, j = np.unravel_index(np.argmin(cost[i]), cost[i].shape)
+    chain = []
+    used = set()
+    while j != 0 and i > 0:
+        if j in used:  # a loop through the same point: not a chain
+            return order_from_hub(points, hub)
+        used.add(j)
+        chain.append(j)
+        pi, pk = back[i][k, j]
+        i, j, k = pi, k, pk
+        if i <= 0 or j == 0:
+            break
+    return nodes[chain[::-1]]
+
+
+def stray_spots(dets: list[np.ndarray], hub: np.ndarray, markers: int, spacing_px: float,
+                spots=None) -> list[np.ndarray]:
+    """The still things of the markers' colour that are not on the rod [px]: still spots (static_spots, the
+    hub's aside) that the spaced chain leaves out in most of the frames showing them. A marker of a rod held
+    balanced for most of the clip holds still too, but the chain runs through it."""
+    spots = [c for c, _ in (static_spots(dets) if spots is None else spots) if np.linalg.norm(c - hub) > 2 * HUB_TOL_PX]
+    if not spots:
+        return []
+    seen, used = np.zeros(len(spots)), np.zeros(len(spots))
+    for d in dets[::max(1, len(dets) // 400)]:
+        if not len(d):
+            continue
+        chain = rod_markers(d, hub, markers, spacing_px)
+        for i, c in enumerate(spots):
+            if np.hypot(*(d - c).T).min() <= HUB_TOL_PX:
+                seen[i] += 1
+                used[i] += bool(len(chain)) and np.hypot(*(chain - c).T).min() <= HUB_TOL_PX
+    return [c for c, n, u in zip(spots, seen, used) if n and u < 0.5 * n]
+
+
+def without_strays(frame_dets: np.ndarray, strays: list[np.ndarray], spacing_px: float) -> np.ndarray:
+    """frame_dets without the blobs within half a spacing of a stray spot: a marker passing over one merges
+    with it into one blob whose centroid is neither (the markers are less than a spacing across, so a merged
+    centroid is within half a spacing of the spot); the marker is then hidden, and filled in."""
+    for c in strays:
+        if len(frame_dets):
+            frame_dets = frame_dets[np.hypot(*(frame_dets - c).T) > 0.5 * spacing_px]
+    return frame_dets
 
 
 def chain_length(ordered: np.ndarray, hub: np.ndarray) -> float:
@@ -70,11 +197,14 @@ def chain_length(ordered: np.ndarray, hub: np.ndarray) -> float:
     return float(np.sum(np.hypot(*np.diff(pts, axis=0).T)))
 
 
-def rod_length_px(dets: list[np.ndarray], hub: np.ndarray, markers: int) -> float:
+def rod_length_px(dets: list[np.ndarray], hub: np.ndarray, markers: int, spots=None) -> float:
     """The rod's length in the image [px]: the median chain length of the frames showing every marker."""
     lengths = []
     step = max(1, len(dets) // 2000)
+    still = [c for c, _ in (static_spots(dets) if spots is None else spots) if np.linalg.norm(c - hub) > 2 * HUB_TOL_PX]
     for d in dets[::step]:
+        for c in still:  # something else that holds still is not a marker the rod carries past it
+            d = d[np.hypot(*(d - c).T) > HUB_TOL_PX] if len(d) else d
         m = rod_markers(d, hub)
         if len(m) == markers:
             lengths.append(chain_length(m, hub))
