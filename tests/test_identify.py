@@ -4,6 +4,7 @@ cannot identify anything, flags non-physical values, and runs over sim:// with a
 from __future__ import annotations
 
 import dataclasses
+import time
 from functools import lru_cache
 
 import numpy as np
@@ -358,3 +359,64 @@ def test_ctrl_c_between_experiments_says_how_to_fit_the_logs_it_kept(tmp_path):
     matched = glob.glob(shlex.split(pattern)[0])
     assert sorted(matched) == sorted([str(kept[0]), str(kept[0]) + ".events.csv"])
     assert not (tmp_path / "o.toml").exists()
+
+
+def _identify_log(path, end: str):
+    """A log as `rodctl identify` closes it, ended `end`; its rod never moves (the fit would refuse it)."""
+    from rodctl.link import protocol as P
+    from rodctl.logs import LogWriter, simulator_metadata
+
+    p = load_params()
+    w = LogWriter(path, simulator_metadata(p), n=p.N)
+    for k in range(500):
+        w.write_telemetry(P.Telemetry(int(P.Mode.IDENTIFY), 0, 5, p.N, 0, 0.0, 0.02, 0.04, 10, 0, 0, 0,
+                                      (0.0,) * p.N, (0.0,) * p.N), k, k * 1000)
+    w.close({"end": end, "experiment": "steps"})
+    return path
+
+
+def test_fitting_logs_skips_the_runs_that_did_not_play_to_their_end(tmp_path):
+    """The live run fits only complete runs; `rodctl identify logs/identify-STAMP-*.csv` (the glob a Ctrl-C
+    names) also matches a run stopped at the soft limit and the one a Ctrl-C cut short: the fit skips
+    them, saying so, instead of fitting their first seconds."""
+    stopped = _identify_log(tmp_path / "identify-1-steps.csv", "stopped: swung 48 deg from hanging (soft limit 48 deg)")
+    cut = _identify_log(tmp_path / "identify-1-chirp.csv", "error")
+    r = run_rodctl("identify", str(stopped), str(cut), "--out", str(tmp_path / "o.toml"))
+    assert r.returncode == 2, r.stderr
+    err = r.stderr.strip().splitlines()
+    assert f"fit: skipping {stopped}: the experiment did not play to its end (stopped: swung 48 deg" in err[0]
+    assert err[1] == f"fit: skipping {cut}: the experiment did not play to its end (error)"
+    assert err[-1] == "rodctl: no experiment log played to its end (2 skipped): nothing to fit"
+    assert not (tmp_path / "o.toml").exists()
+
+
+def test_ctrl_c_mid_experiment_disarms_and_counts_only_the_complete_runs(tmp_path):
+    import signal
+
+    from host_tools import start_rodctl
+
+    logs = tmp_path / "logs"
+    proc = start_rodctl("identify", "--port", "sim://", "--experiment", "release", "--experiment", "chirp", "--yes",
+                        "--settle", "1", "--log-dir", str(logs), "--out", str(tmp_path / "o.toml"))
+    try:
+        seen = []
+        for line in proc.stderr:
+            seen.append(line)
+            if line.startswith("[2/2] chirp"):
+                break
+        time.sleep(1.5)  # the chirp is playing
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, "".join(seen) + err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("rodctl: interrupted; the motor is off; 2 experiment logs kept (1 played to the end; "
+                           "the fit skips the others): fit it with: rodctl identify "), last
+    chirp = next(logs.glob("identify-*-chirp.csv"))
+    from rodctl.logs import read_log
+
+    log = read_log(chirp, columns=["mode_code"])
+    assert log.trailer["end"] == "error"
+    assert int(log.data["mode_code"][-1]) == 0, "the board is DISARMED in the last frame logged"
+    assert not (tmp_path / "o.toml").exists() and not (tmp_path / "o.png").exists()
