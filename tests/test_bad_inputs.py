@@ -336,3 +336,20 @@ def test_a_parameter_file_given_as_a_log_is_not_called_an_old_log(tmp_path):
     r = run_rodctl("plot", str(f), "--out", str(tmp_path / "x.png"))
     assert r.returncode == 2 and _one_line(r) == f"rodctl: {f}: not a rodctl log (CSV, Parquet or MCAP)"
     assert not (tmp_path / "x.png").exists()
+
+
+@pytest.mark.parametrize("option", ["--header", "--json"])
+def test_gains_with_an_empty_output_name_writes_nothing(option):
+    """`--header "$OUT"` with OUT unset: refused, not taken for no --header (the committed header)."""
+    from rodctl import paths
+
+    before = {f: f.read_bytes() for f in (paths.COMMITTED_HEADER, paths.COMMITTED_HEADER.with_suffix(".toml"))}
+    try:
+        r = run_rodctl("gains", option, "")
+        assert r.returncode == 2
+        assert _one_line(r) == f"rodctl: {option}: empty file name"
+    finally:
+        changed = [f for f, b in before.items() if f.read_bytes() != b]
+        for f in changed:
+            f.write_bytes(before[f])
+    assert not changed, f"{option} '' rewrote {changed}"
