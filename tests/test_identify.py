@@ -420,3 +420,17 @@ def test_ctrl_c_mid_experiment_disarms_and_counts_only_the_complete_runs(tmp_pat
     assert log.trailer["end"] == "error"
     assert int(log.data["mode_code"][-1]) == 0, "the board is DISARMED in the last frame logged"
     assert not (tmp_path / "o.toml").exists() and not (tmp_path / "o.png").exists()
+
+
+def test_an_existing_figure_is_kept_unless_force(tmp_path):
+    """--plot (default: --out with .png) is this run's output as much as --out: checked before the fit."""
+    log = _identify_log(tmp_path / "identify-1-steps.csv", "done")
+    fig = tmp_path / "o.png"
+    fig.write_bytes(b"another rig's figure")
+    r = run_rodctl("identify", str(log), "--out", str(tmp_path / "o.toml"))
+    assert r.returncode == 2
+    assert r.stderr.strip() == f"rodctl: --plot {fig} exists; pass --force to overwrite"
+    assert fig.read_bytes() == b"another rig's figure" and not (tmp_path / "o.toml").exists()
+    r = run_rodctl("identify", str(log), "--out", str(tmp_path / "o.toml"), "--force")
+    assert "exists" not in r.stderr  # --force lets it through to the fit (this log cannot identify anything)
+    assert r.stderr.strip().splitlines()[-1].startswith("rodctl: not identifiable"), r.stderr

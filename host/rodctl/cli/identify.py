@@ -412,7 +412,8 @@ def plot_path(args) -> Path:
 
 def check_outputs(args) -> None:
     check_output(args.out, "--out", force=args.force)
-    check_output(plot_path(args), "--plot", figure=True)
+    # the figure is this run's too: an existing one (often from another rig's run) is kept unless --force
+    check_output(plot_path(args), "--plot", force=args.force, figure=True)
 
 
 def run_identify(args) -> int:
@@ -453,7 +454,7 @@ def register(sub) -> None:
     add_port_arg(p)
     p.add_argument("--experiment", action="append", metavar="NAME", help=f"run only these ({names}; repeatable)")
     p.add_argument("--out", default="my_rod.toml", metavar="PATH", help="parameter file to write (default my_rod.toml)")
-    p.add_argument("--force", action="store_true", help="overwrite --out")
+    p.add_argument("--force", action="store_true", help="overwrite --out and --plot")
     p.add_argument("--plot", metavar="PNG", help="figure of measured vs simulated theta_1 (default: --out with .png)")
     p.add_argument("--log-dir", default=".", metavar="DIR", help="where the experiments' logs go (default .)")
     p.add_argument("--yes", action="store_true", help="do not ask before moving the motor")
