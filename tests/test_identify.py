@@ -413,6 +413,7 @@ def test_ctrl_c_mid_experiment_disarms_and_counts_only_the_complete_runs(tmp_pat
     last = err.strip().splitlines()[-1]
     assert last.startswith("rodctl: interrupted; the motor is off; 2 experiment logs kept (1 played to the end; "
                            "the fit skips the others): fit it with: rodctl identify "), last
+    assert last.endswith(f"*.csv --out {tmp_path / 'o.toml'}"), "the file asked for, not the default my_rod.toml"
     chirp = next(logs.glob("identify-*-chirp.csv"))
     from rodctl.logs import read_log
 

@@ -197,6 +197,8 @@ def run_port(args) -> int:
                   f"kept: {', '.join(str(f) for f in kept)})", file=sys.stderr)
             return 130
         pattern = shlex.quote(str(log_dir / f"identify-{stamp}-")) + "*.csv"
+        # the file the user asked for, not the default my_rod.toml
+        pattern += "".join(f" {o} {shlex.quote(str(v))}" for o, v in (("--out", args.out), ("--plot", args.plot)) if v)
         played = "" if len(complete) == len(kept) else f" ({len(complete)} played to the end; the fit skips the others)"
         print(f"rodctl: interrupted; the motor is off; {len(kept)} experiment log{'s' * (len(kept) > 1)} kept{played}: "
               f"fit {'them' if len(complete) > 1 else 'it'} with: rodctl identify {pattern}", file=sys.stderr)
