@@ -435,3 +435,12 @@ def test_an_existing_figure_is_kept_unless_force(tmp_path):
     r = run_rodctl("identify", str(log), "--out", str(tmp_path / "o.toml"), "--force")
     assert "exists" not in r.stderr  # --force lets it through to the fit (this log cannot identify anything)
     assert r.stderr.strip().splitlines()[-1].startswith("rodctl: not identifiable"), r.stderr
+
+
+def test_an_experiment_named_twice_is_refused_before_anything_moves(tmp_path):
+    """Its log is named after it: the second run used to stop on the first's log, after the motor had moved."""
+    r = run_rodctl("identify", "--port", "sim://", "--experiment", "release", "--experiment", "release", "--yes",
+                   "--log-dir", str(tmp_path / "logs"), "--out", str(tmp_path / "o.toml"), timeout=60)
+    assert r.returncode == 2
+    assert r.stderr.strip() == "rodctl: --experiment release: given twice; each experiment runs once"
+    assert not tmp_path.joinpath("logs").exists() and not list(tmp_path.iterdir())
