@@ -336,3 +336,39 @@ def test_a_parameter_file_given_as_a_log_is_not_called_an_old_log(tmp_path):
     r = run_rodctl("plot", str(f), "--out", str(tmp_path / "x.png"))
     assert r.returncode == 2 and _one_line(r) == f"rodctl: {f}: not a rodctl log (CSV, Parquet or MCAP)"
     assert not (tmp_path / "x.png").exists()
+
+
+@pytest.mark.parametrize("option", ["--header", "--json"])
+def test_gains_with_an_empty_output_name_writes_nothing(option):
+    """`--header "$OUT"` with OUT unset: refused, not taken for no --header (the committed header)."""
+    from rodctl import paths
+
+    before = {f: f.read_bytes() for f in (paths.COMMITTED_HEADER, paths.COMMITTED_HEADER.with_suffix(".toml"))}
+    try:
+        r = run_rodctl("gains", option, "")
+        assert r.returncode == 2
+        assert _one_line(r) == f"rodctl: {option}: empty file name"
+    finally:
+        changed = [f for f, b in before.items() if f.read_bytes() != b]
+        for f in changed:
+            f.write_bytes(before[f])
+    assert not changed, f"{option} '' rewrote {changed}"
+
+
+@pytest.mark.parametrize("text, says", [
+    ("[rod]\nlenght = 0.14\n", "{f}: rod.lenght: unknown key (did you mean rod.length?)"),
+    ("[rod]\nbacklash_deg = 1.5\n", "{f}: rod.backlash_deg: unknown key (it belongs in [gearbox])"),
+    ("", "{f}: no parameters in it (every key is required: `rodctl params --out FILE` writes a complete file to edit)"),
+    ("# my rig\n", "{f}: no parameters in it (every key is required: `rodctl params --out FILE` writes a complete "
+                   "file to edit)"),
+])
+def test_a_parameter_file_that_is_empty_or_misspelled_is_named(tmp_path, text, says):
+    """The file is named (a sim:// URL can carry two: params= and plant=) with the key it meant."""
+    f = tmp_path / "my_rig.toml"
+    f.write_text(text)
+    r = run_rodctl("gains", "--params", str(f), "--report")
+    assert r.returncode == 2
+    assert _one_line(r) == "rodctl: " + says.format(f=f)
+    r = run_rodctl("status", "--port", f"sim://?plant={f}")
+    assert r.returncode == 2
+    assert _one_line(r) == "rodctl: sim://: " + says.format(f=f)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from host_tools import run_rodctl
 from rodgains.params import load_params
 
@@ -49,3 +51,11 @@ def test_sim_device_takes_set_for_its_firmware_and_plant():
     assert st["header_sha256"] == load_params(None, ["rod.length=0.14"]).sha256()
     assert st["params_source"] == "defaults with --set rod.length=0.14"
     assert abs(abs(st["theta_hat_rad"][0]) - 3.14159) < 0.05  # it powered on upright
+
+
+@pytest.mark.parametrize("model", ["der", "inextensible"])
+def test_sim_device_drives_the_plant_of_its_parameter_file(model):
+    """As sim://?params=FILE does: `rodctl sim-device --params FILE` is no other rod than FILE's [plant]."""
+    r = run_rodctl("sim-device", "--set", f"plant.model={model}", "--duration", "0.5", timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert f", plant {model} with " in r.stdout.splitlines()[0], r.stdout

@@ -4,6 +4,7 @@ cannot identify anything, flags non-physical values, and runs over sim:// with a
 from __future__ import annotations
 
 import dataclasses
+import time
 from functools import lru_cache
 
 import numpy as np
@@ -358,3 +359,88 @@ def test_ctrl_c_between_experiments_says_how_to_fit_the_logs_it_kept(tmp_path):
     matched = glob.glob(shlex.split(pattern)[0])
     assert sorted(matched) == sorted([str(kept[0]), str(kept[0]) + ".events.csv"])
     assert not (tmp_path / "o.toml").exists()
+
+
+def _identify_log(path, end: str):
+    """A log as `rodctl identify` closes it, ended `end`; its rod never moves (the fit would refuse it)."""
+    from rodctl.link import protocol as P
+    from rodctl.logs import LogWriter, simulator_metadata
+
+    p = load_params()
+    w = LogWriter(path, simulator_metadata(p), n=p.N)
+    for k in range(500):
+        w.write_telemetry(P.Telemetry(int(P.Mode.IDENTIFY), 0, 5, p.N, 0, 0.0, 0.02, 0.04, 10, 0, 0, 0,
+                                      (0.0,) * p.N, (0.0,) * p.N), k, k * 1000)
+    w.close({"end": end, "experiment": "steps"})
+    return path
+
+
+def test_fitting_logs_skips_the_runs_that_did_not_play_to_their_end(tmp_path):
+    """The live run fits only complete runs; `rodctl identify logs/identify-STAMP-*.csv` (the glob a Ctrl-C
+    names) also matches a run stopped at the soft limit and the one a Ctrl-C cut short: the fit skips
+    them, saying so, instead of fitting their first seconds."""
+    stopped = _identify_log(tmp_path / "identify-1-steps.csv", "stopped: swung 48 deg from hanging (soft limit 48 deg)")
+    cut = _identify_log(tmp_path / "identify-1-chirp.csv", "error")
+    r = run_rodctl("identify", str(stopped), str(cut), "--out", str(tmp_path / "o.toml"))
+    assert r.returncode == 2, r.stderr
+    err = r.stderr.strip().splitlines()
+    assert f"fit: skipping {stopped}: the experiment did not play to its end (stopped: swung 48 deg" in err[0]
+    assert err[1] == f"fit: skipping {cut}: the experiment did not play to its end (error)"
+    assert err[-1] == "rodctl: no experiment log played to its end (2 skipped): nothing to fit"
+    assert not (tmp_path / "o.toml").exists()
+
+
+def test_ctrl_c_mid_experiment_disarms_and_counts_only_the_complete_runs(tmp_path):
+    import signal
+
+    from host_tools import start_rodctl
+
+    logs = tmp_path / "logs"
+    proc = start_rodctl("identify", "--port", "sim://", "--experiment", "release", "--experiment", "chirp", "--yes",
+                        "--settle", "1", "--log-dir", str(logs), "--out", str(tmp_path / "o.toml"))
+    try:
+        seen = []
+        for line in proc.stderr:
+            seen.append(line)
+            if line.startswith("[2/2] chirp"):
+                break
+        time.sleep(1.5)  # the chirp is playing
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, "".join(seen) + err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("rodctl: interrupted; the motor is off; 2 experiment logs kept (1 played to the end; "
+                           "the fit skips the others): fit it with: rodctl identify "), last
+    assert last.endswith(f"*.csv --out {tmp_path / 'o.toml'}"), "the file asked for, not the default my_rod.toml"
+    chirp = next(logs.glob("identify-*-chirp.csv"))
+    from rodctl.logs import read_log
+
+    log = read_log(chirp, columns=["mode_code"])
+    assert log.trailer["end"] == "error"
+    assert int(log.data["mode_code"][-1]) == 0, "the board is DISARMED in the last frame logged"
+    assert not (tmp_path / "o.toml").exists() and not (tmp_path / "o.png").exists()
+
+
+def test_an_existing_figure_is_kept_unless_force(tmp_path):
+    """--plot (default: --out with .png) is this run's output as much as --out: checked before the fit."""
+    log = _identify_log(tmp_path / "identify-1-steps.csv", "done")
+    fig = tmp_path / "o.png"
+    fig.write_bytes(b"another rig's figure")
+    r = run_rodctl("identify", str(log), "--out", str(tmp_path / "o.toml"))
+    assert r.returncode == 2
+    assert r.stderr.strip() == f"rodctl: --plot {fig} exists; pass --force to overwrite"
+    assert fig.read_bytes() == b"another rig's figure" and not (tmp_path / "o.toml").exists()
+    r = run_rodctl("identify", str(log), "--out", str(tmp_path / "o.toml"), "--force")
+    assert "exists" not in r.stderr  # --force lets it through to the fit (this log cannot identify anything)
+    assert r.stderr.strip().splitlines()[-1].startswith("rodctl: not identifiable"), r.stderr
+
+
+def test_an_experiment_named_twice_is_refused_before_anything_moves(tmp_path):
+    """Its log is named after it: the second run used to stop on the first's log, after the motor had moved."""
+    r = run_rodctl("identify", "--port", "sim://", "--experiment", "release", "--experiment", "release", "--yes",
+                   "--log-dir", str(tmp_path / "logs"), "--out", str(tmp_path / "o.toml"), timeout=60)
+    assert r.returncode == 2
+    assert r.stderr.strip() == "rodctl: --experiment release: given twice; each experiment runs once"
+    assert not tmp_path.joinpath("logs").exists() and not list(tmp_path.iterdir())

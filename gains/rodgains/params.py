@@ -439,6 +439,17 @@ def load_params(path: str | Path | None = None, overrides: list[str] | tuple[str
     return Params(validate(raw, source=str(path)), source=str(path))
 
 
+def _did_you_mean(section: str, key: str) -> str:
+    """A misspelled key, or one put in the wrong table, named as the schema spells it."""
+    import difflib
+
+    close = difflib.get_close_matches(key, list(SCHEMA[section]), n=1, cutoff=0.75)
+    if close:
+        return f" (did you mean {section}.{close[0]}?)"
+    elsewhere = [s for s, keys in SCHEMA.items() if key in keys]
+    return f" (it belongs in [{elsewhere[0]}])" if elsewhere else ""
+
+
 def validate(raw: dict, source: str = "parameters") -> dict:
     for section, table in raw.items():
         if section not in SCHEMA:
@@ -447,7 +458,10 @@ def validate(raw: dict, source: str = "parameters") -> dict:
             raise ParamError(f"{source}: {section} must be a table")
         for key in table:
             if key not in SCHEMA[section]:
-                raise ParamError(f"{section}.{key}: unknown key")
+                raise ParamError(f"{source}: {section}.{key}: unknown key{_did_you_mean(section, key)}")
+    if not raw:
+        raise ParamError(f"{source}: no parameters in it (every key is required: `rodctl params --out FILE` "
+                         "writes a complete file to edit)")
     out: dict[str, dict[str, Any]] = {}
     for section, keys in SCHEMA.items():
         out[section] = {}

@@ -12,7 +12,7 @@ from rodgains.errors import InputError
 from rodgains.params import DEFAULT_PARAMS, Params, load_params
 
 from rodctl import paths
-from rodctl.cli.outputs import check_output, check_output_folder, make_folder
+from rodctl.cli.outputs import check_name, check_output, check_output_folder, make_folder
 
 
 def add_param_args(p: argparse.ArgumentParser) -> None:
@@ -87,11 +87,12 @@ def _write(path: Path, text: str) -> None:
 
 
 def run_gains(args) -> int:
-    if args.json:
+    # `is not None`: an empty name (an unset shell variable) is refused, never taken for "not given",
+    # which would write the committed header in the checkout
+    if args.json is not None:
         check_output(args.json, "--json")
-    if args.header:
-        if Path(args.header).is_dir():
-            raise InputError(f"--header {args.header}: is a folder")
+    if args.header is not None:
+        check_name(args.header, "--header")
     elif not (args.report or args.json or args.check):
         paths.require_checkout("writing the committed header (or pass --header PATH)")
     if (args.header or not (args.report or args.json)) and not args.check:  # the header will be written

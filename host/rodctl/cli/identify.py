@@ -191,9 +191,17 @@ def run_port(args) -> int:
         kept = [f for f in log_dir.glob(f"identify-{stamp}-*.csv") if not f.name.endswith(".events.csv")]
         if not kept:
             raise
+        complete = [f for f in kept if incomplete_run(f) is None]
+        if not complete:
+            print(f"rodctl: interrupted; the motor is off; no experiment played to its end (log{'s' * (len(kept) > 1)} "
+                  f"kept: {', '.join(str(f) for f in kept)})", file=sys.stderr)
+            return 130
         pattern = shlex.quote(str(log_dir / f"identify-{stamp}-")) + "*.csv"
-        print(f"rodctl: interrupted; the motor is off; {len(kept)} experiment log{'s' * (len(kept) > 1)} kept: "
-              f"fit {'them' if len(kept) > 1 else 'it'} with: rodctl identify {pattern}", file=sys.stderr)
+        # the file the user asked for, not the default my_rod.toml
+        pattern += "".join(f" {o} {shlex.quote(str(v))}" for o, v in (("--out", args.out), ("--plot", args.plot)) if v)
+        played = "" if len(complete) == len(kept) else f" ({len(complete)} played to the end; the fit skips the others)"
+        print(f"rodctl: interrupted; the motor is off; {len(kept)} experiment log{'s' * (len(kept) > 1)} kept{played}: "
+              f"fit {'them' if len(complete) > 1 else 'it'} with: rodctl identify {pattern}", file=sys.stderr)
         return 130
 
 
@@ -253,12 +261,21 @@ def fit_logs(args, logs: list[Path], params=None, source: str = "") -> int:
     from rodctl.ident import fit as F
     from rodctl.ident import report as R
 
-    records, digests, meta0 = [], [], None
+    records, digests, meta0, skipped = [], [], None, 0
     for path in logs:
         meta, recs = E.records_from_log(path)
+        why = _ended_early(meta)
+        if why is not None:
+            # the live run fits only the runs that played to their end (a stopped one is played again
+            # smaller): fitting its logs afterwards, by the glob a Ctrl-C names, must fit the same records
+            print(f"fit: skipping {path}: the experiment did not play to its end ({why})", file=sys.stderr, flush=True)
+            skipped += 1
+            continue
         meta0 = meta0 or meta
         records += recs
         digests.append((Path(path).name, E.file_sha256(path)))
+    if skipped and not digests:
+        raise InputError(f"no experiment log played to its end ({skipped} skipped): nothing to fit")
     if params is None:
         params, source = _nominal(args, meta0)
     print(f"fit: {len(records)} records, {sum(r.seconds for r in records):.1f} s of excitation; nominal: {source}",
@@ -288,6 +305,24 @@ def fit_logs(args, logs: list[Path], params=None, source: str = "") -> int:
         print(f"rodctl: {name}: {why}; kept nominal in {out}", file=sys.stderr)
     print("\n".join(lines))  # last, where no one can miss it
     return 0 if verdict.ready and not res.out_of_range else 1
+
+
+def _ended_early(meta: dict) -> str | None:
+    """How an experiment log of `rodctl identify` ended when it did not play to its end ("stopped: swung
+    ..." past the soft limit, "error" for a Ctrl-C or a lost link, "fault", "timeout"); None for a
+    complete run, or a log without that record (another tool's, or one a kill cut off)."""
+    end = meta.get("end")
+    return None if end in (None, "", "done") else str(end)
+
+
+def incomplete_run(path: Path) -> str | None:
+    """_ended_early for a log on disk."""
+    from rodctl.logs import read_log
+
+    try:
+        return _ended_early(read_log(path, columns=["mode_code"]).trailer)
+    except Exception:  # noqa: BLE001 - an unreadable log is reported by the fit that reads it
+        return None
 
 
 def _verdict(args, written):
@@ -379,7 +414,8 @@ def plot_path(args) -> Path:
 
 def check_outputs(args) -> None:
     check_output(args.out, "--out", force=args.force)
-    check_output(plot_path(args), "--plot", figure=True)
+    # the figure is this run's too: an existing one (often from another rig's run) is kept unless --force
+    check_output(plot_path(args), "--plot", force=args.force, figure=True)
 
 
 def run_identify(args) -> int:
@@ -420,7 +456,7 @@ def register(sub) -> None:
     add_port_arg(p)
     p.add_argument("--experiment", action="append", metavar="NAME", help=f"run only these ({names}; repeatable)")
     p.add_argument("--out", default="my_rod.toml", metavar="PATH", help="parameter file to write (default my_rod.toml)")
-    p.add_argument("--force", action="store_true", help="overwrite --out")
+    p.add_argument("--force", action="store_true", help="overwrite --out and --plot")
     p.add_argument("--plot", metavar="PNG", help="figure of measured vs simulated theta_1 (default: --out with .png)")
     p.add_argument("--log-dir", default=".", metavar="DIR", help="where the experiments' logs go (default .)")
     p.add_argument("--yes", action="store_true", help="do not ask before moving the motor")

@@ -138,7 +138,9 @@ def register(sub) -> None:
                    help="override one parameter of --params, for the firmware build and the plant (repeatable)")
     p.add_argument("--theta0-deg", type=float, default=0.0, metavar="DEG",
                    help="every edge's angle at power-on (0 hanging, 180 upright)")
-    p.add_argument("--plant", choices=("inextensible", "der"), default="inextensible", help="simulated rod model")
+    # None: the file's [plant] table, as sim:// and `rodctl sim` do; the board drives the faithful rod
+    p.add_argument("--plant", choices=("inextensible", "der"),
+                   help="simulated rod model (default: the parameter file's plant.model, as sim://)")
     p.add_argument("--edges", type=int, help="plant edges (default: the parameters' N)")
     p.add_argument("--link", metavar="PATH", help="also make PATH a symlink to the pseudo-terminal")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds of wall time [s]")

@@ -80,6 +80,9 @@ def select(names: list[str] | None) -> list[Experiment]:
     for n in names:
         if n not in EXPERIMENTS:
             raise InputError(f"--experiment {n}: unknown; choose from {', '.join(EXPERIMENTS)}")
+        if EXPERIMENTS[n] in out:
+            # its log is named after it: the second run would stop, motor already moved, on the first's log
+            raise InputError(f"--experiment {n}: given twice; each experiment runs once")
         out.append(EXPERIMENTS[n])
     return out
 
