@@ -176,25 +176,33 @@ def test_bad_input_is_one_line_and_exit_2(filmed, tmp_path, args, message):
 
 # --- clips made from the 120 fps one with OpenCV (read, change, write again as MP4) ----------------------
 
-def rewrite(src, dst, change=lambda k, frame: frame, keep=lambda k: True):
-    """dst: src's frames (those `keep` keeps) through `change(index, frame)`, encoded again (mp4v)."""
-    from rodctl.track.render import write_video
-
+def frames_of(src, keep=lambda k: True):
+    """(fps, (width, height), an iterator over (index, BGR frame) of the frames of src that `keep` keeps)."""
     cap = cv2.VideoCapture(str(src))
     fps, size = cap.get(cv2.CAP_PROP_FPS), (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
 
     def frames():
         k = 0
-        while True:
-            ok, f = cap.read()
-            if not ok:
-                return
-            if keep(k):
-                yield change(k, f)
-            k += 1
+        try:
+            while True:
+                ok, f = cap.read()
+                if not ok:
+                    return
+                if keep(k):
+                    yield k, f
+                k += 1
+        finally:
+            cap.release()
 
-    write_video(dst, fps, frames(), size)
-    cap.release()
+    return fps, size, frames()
+
+
+def rewrite(src, dst, change=lambda k, frame: frame, keep=lambda k: True):
+    """dst: src's frames (those `keep` keeps) through `change(index, frame)`, encoded again (mp4v)."""
+    from rodctl.track.render import write_video
+
+    fps, size, frames = frames_of(src, keep)
+    write_video(dst, fps, (change(k, f) for k, f in frames), size)
     return dst
 
 
@@ -231,27 +239,18 @@ def rewrite_timed(src, dst, keep):
     import fractions
 
     av = pytest.importorskip("av")
-    cap = cv2.VideoCapture(str(src))
-    fps = cap.get(cv2.CAP_PROP_FPS)
+    fps, (width, height), frames = frames_of(src, keep)
     tick = fractions.Fraction(1, 12_000)  # 100 ticks a frame at 120 fps (MPEG-4 part 2 allows 65535 a second)
     with av.open(str(dst), "w") as out:
         s = out.add_stream("mpeg4", rate=round(fps))
-        s.width, s.height = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
-        s.pix_fmt = "yuv420p"
+        s.width, s.height, s.pix_fmt = width, height, "yuv420p"
         s.time_base = s.codec_context.time_base = tick
         s.bit_rate = 20_000_000
-        k = 0
-        while True:
-            ok, f = cap.read()
-            if not ok:
-                break
-            if keep(k):
-                frame = av.VideoFrame.from_ndarray(f, format="bgr24")
-                frame.pts, frame.time_base = round(k / fps / tick), tick
-                out.mux(s.encode(frame))
-            k += 1
+        for k, f in frames:
+            frame = av.VideoFrame.from_ndarray(f, format="bgr24")
+            frame.pts, frame.time_base = round(k / fps / tick), tick
+            out.mux(s.encode(frame))
         out.mux(s.encode())
-    cap.release()
     return dst
 
 
@@ -346,8 +345,13 @@ def test_still_things_of_the_markers_colour_within_the_rod_s_reach_are_left_out(
     d = filmed[120]
     hub = tracked[120].hub_px
     stickers = [(int(hub[0] + 60), int(hub[1] + 38)), (int(hub[0]), int(hub[1] - 102))]
-    video = rewrite(d["video"], tmp_path / "stickers.mp4",
-                    change=lambda k, f: [cv2.circle(f, c, 6, MARKER_BGR, -1, cv2.LINE_AA) for c in stickers] and f)
+
+    def stick(k, frame):
+        for c in stickers:
+            cv2.circle(frame, c, 6, MARKER_BGR, -1, cv2.LINE_AA)
+        return frame
+
+    video = rewrite(d["video"], tmp_path / "stickers.mp4", change=stick)
     r = track(video, d["log"], None, view=View.from_checkerboard(d["board"], (9, 6), 0.02), say=None)
     assert np.linalg.norm(r.hub_px - hub) < 1.0
     ok = np.isfinite(r.theta).all(axis=1)
