@@ -193,7 +193,8 @@ def run_port(args) -> int:
             raise
         pattern = shlex.quote(str(log_dir / f"identify-{stamp}-")) + "*.csv"
         print(f"rodctl: interrupted; the motor is off; {len(kept)} experiment log{'s' * (len(kept) > 1)} kept: "
-              f"fit {'them' if len(kept) > 1 else 'it'} with: rodctl identify {pattern}", file=sys.stderr)
+              f"fit {'them' if len(kept) > 1 else 'it'} with: rodctl identify {pattern} --out {shlex.quote(str(args.out))}",
+              file=sys.stderr)
         return 130
 
 
