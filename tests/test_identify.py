@@ -358,6 +358,7 @@ def test_ctrl_c_between_experiments_says_how_to_fit_the_logs_it_kept(tmp_path):
     # the shell's matches are the log and its event sidecar, which identify skips (run_identify)
     matched = glob.glob(shlex.split(pattern)[0])
     assert sorted(matched) == sorted([str(kept[0]), str(kept[0]) + ".events.csv"])
+    assert shlex.split(pattern)[1:] == ["--out", str(tmp_path / "o.toml")]  # the fit writes where the run would have
     assert not (tmp_path / "o.toml").exists()
 
 

@@ -145,6 +145,17 @@ def test_scope_without_a_display_is_one_clear_line():
     assert len(lines) == 1 and lines[0].startswith("rodctl: the scope needs a display: no display")
 
 
+def test_the_headless_scopes_suggestion_pastes_into_a_shell():
+    """The suggested command quotes a port with ? and & (zsh refuses an unmatched glob; bash runs `&` in the background)."""
+    env = rodctl_env()
+    env.pop("DISPLAY", None)
+    env.pop("WAYLAND_DISPLAY", None)
+    r = subprocess.run([*RODCTL, "scope", "--port", "sim://?theta0_deg=150&motor_sign=1"], capture_output=True,
+                       text=True, env=env, timeout=60)
+    assert r.returncode == 1
+    assert "`rodctl log --port 'sim://?theta0_deg=150&motor_sign=1' --out run.csv`" in r.stderr
+
+
 def test_keys_and_buttons_arm_set_record_and_disarm(tmp_path):
     """The scope's actions on a live virtual board, drawn with Agg (what a key or button calls)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg

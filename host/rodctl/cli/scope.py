@@ -13,6 +13,7 @@ board and end the session without a traceback.
 from __future__ import annotations
 
 import collections
+import shlex
 import signal
 import sys
 import threading
@@ -332,7 +333,7 @@ def run_scope(args) -> int:
     why = display_problem()
     if why is not None:
         raise UserError(f"the scope needs a display: {why}. Record instead with "
-                        f"`rodctl log --port {args.port or 'PORT'} --out run.csv`, then "
+                        f"`rodctl log --port {shlex.quote(args.port) if args.port else 'PORT'} --out run.csv`, then "
                         "`rodctl plot run.csv --out run.png`")
     import matplotlib.pyplot as plt
 
