@@ -281,9 +281,13 @@ def test_robustness_writes_json_and_heatmap(tmp_path, capsys):
     assert main(["robustness", "--cases", "quick", "--samples", "1", "--seconds", str(SECONDS), "--jobs", "2",
                  "--json", str(js), "--plot", str(png)]) == 0
     doc = json.loads(js.read_text())
-    out = capsys.readouterr().out
+    cap = capsys.readouterr()
+    out = cap.out
     assert f"score {doc['score']['score']:.4f}" in out
     assert doc["score"]["runs"] == len(doc["runs"]) == len(quick_units(samples=1))
+    # stderr is no terminal here (a log file, CI): the progress comes as whole lines, the last one complete
+    assert "\r" not in cap.err and ", 2 of them on Monte Carlo plants)" in cap.err, cap.err
+    assert any(line.startswith("robustness: 100%") for line in cap.err.splitlines()), cap.err
     assert doc["parameters"]["uncertainty"]["samples"] == load_params()["uncertainty"]["samples"]
     draw_rows = [r for r in doc["runs"] if r["kind"] == "draw"]
     assert draw_rows and all(r["plant_overrides"] for r in draw_rows)

@@ -121,8 +121,9 @@ def run_robustness(args) -> int:
     t0 = time.monotonic()
     with Runner(args.jobs, args.scheduler) as runner:
         build_sil(params)  # design and compile once here: a refused design stops before any run (exit 3)
-        print(f"{len(units)} runs (case set {args.cases!r} and Monte Carlo plants) on the {runner.where}",
-              file=sys.stderr)
+        drawn = sum(1 for u in units if dict(u.info).get("kind") == "draw")
+        print(f"{len(units)} runs (case set {args.cases!r}" + (f", {drawn} of them on Monte Carlo plants" if drawn else "")
+              + f") on the {runner.where}", file=sys.stderr)
         if plant is not None:
             print(f"the design of {_shown_path(params.source)} judged on the rod of {_shown_path(plant.source)}",
                   file=sys.stderr)

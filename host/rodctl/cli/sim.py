@@ -212,9 +212,10 @@ def run_sim(args) -> int:
     from rodctl.sim.scenarios import DEFAULT, SCENARIOS
 
     if args.list:
+        width = max(len(name) for name in SCENARIOS)
         for name, s in SCENARIOS.items():
             mark = " (default)" if name == DEFAULT else ""
-            print(f"{name:19s} {s.paper:7s} {s.title}{mark}")
+            print(f"{name:{width}s} {s.paper:7s} {s.title}{mark}")
         return 0
     if args.duration is not None and not 0 < args.duration <= 600:
         raise InputError(f"--duration {args.duration}: must be in (0, 600] s")
@@ -237,13 +238,16 @@ def run_sim(args) -> int:
         for line in summary_lines(o):
             print(line)
         print(f"  simulated {sim_seconds:.1f} s in {wall:.2f} s" + (f"; wrote {', '.join(written)}" if written else ""))
-        if SCENARIOS[name].expect_pass is not None and o.passed != SCENARIOS[name].expect_pass:
+        expected = SCENARIOS[name].expect_pass
+        if expected and not o.passed:
             unexpected.append(name)
+        elif expected is False and o.passed:  # another rig's file, or a better design: good news, not an error
+            print(f"  {name} passes, where the default rig's documented outcome is a fail (docs/scenarios.md)")
     if args.all and args.readme:
         replace_table(Path(args.readme), table_markdown(outcomes))
         print(f"updated the scenario table in {args.readme}")
     if unexpected:
-        print(f"rodctl sim: {', '.join(unexpected)} did not meet the expected outcome", file=sys.stderr)
+        print(f"rodctl sim: {', '.join(unexpected)} failed where it must pass", file=sys.stderr)
         return 1
     return 0
 
@@ -254,7 +258,8 @@ def register(sub) -> None:
         description="Run a scenario: the firmware's own C (SIL library built for the parameters) against the "
                     "simulated rod, motor, driver and encoder; or the paper's state-feedback figures. Writes a PNG "
                     "and a log in the device log format (rodctl plot reads it), and prints the metrics. Exit 1 "
-                    "when a scenario does not meet its expected outcome.")
+                    "when a scenario that must pass fails; one whose documented outcome on the default rig is a fail "
+                    "(docs/scenarios.md) exits 0 either way.")
     add_param_args(s)
     s.add_argument("--scenario", metavar="NAME", help="scenario to run (default: swingup); see --list")
     s.add_argument("--list", action="store_true", help="list the scenarios and exit")

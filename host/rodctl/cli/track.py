@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 from rodgains.errors import InputError
@@ -71,9 +70,9 @@ def run_track_command(args) -> int:
 
     bar = None
     if not args.quiet:
-        from tqdm import tqdm
+        from rodctl.progress import bar as progress_bar
 
-        bar = tqdm(unit="frame", desc="track", file=sys.stderr, leave=False)
+        bar = progress_bar(total=None, desc="track", unit="frame", leave=False)
 
     def progress(k, total):
         if bar is not None:

@@ -28,7 +28,6 @@ import multiprocessing
 import os
 import signal
 import socket
-import sys
 import threading
 import time
 import uuid
@@ -347,9 +346,6 @@ def _probe(address: str) -> None:
 def _bar(total: int, desc: str, enabled: bool):
     if not enabled:
         return None
-    from tqdm import tqdm
+    from rodctl.progress import bar
 
-    # Not a terminal (a log, CI): a line every 10 s instead of a redrawn bar.
-    tty = sys.stderr.isatty()
-    return tqdm(total=total, desc=desc, unit="run", file=sys.stderr, dynamic_ncols=True,
-                mininterval=0.2 if tty else 10.0)
+    return bar(total=total, desc=desc, unit="run")

@@ -249,12 +249,9 @@ def tune(params: Params, runner, *, dims: tuple[Dim, ...], budget: int, make_uni
     done = completed(study)
     bar = None
     if progress:
-        import sys
+        from rodctl.progress import bar as progress_bar
 
-        from tqdm import tqdm
-
-        bar = tqdm(total=budget, initial=min(len(done), budget), desc="tune", unit="trial", file=sys.stderr,
-                   dynamic_ncols=True, mininterval=0.2 if sys.stderr.isatty() else 10.0)
+        bar = progress_bar(total=budget, initial=min(len(done), budget), desc="tune", unit="trial")
 
     def best_text() -> str:
         try:
