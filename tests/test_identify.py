@@ -328,25 +328,34 @@ def test_identify_says_how_far_the_identified_rod_is_from_buckling(tmp_path):
     assert len(a) == 1 and a[0].startswith("buckling: the rod above the hub is 0.91")
 
 
-def test_ctrl_c_between_experiments_says_how_to_fit_the_logs_it_kept(tmp_path):
+def _identify_interrupted(tmp_path, second: str, settle: str, until: str, delay_s: float = 0.0):
+    """Run `identify` on sim:// (release, then `second`) and send Ctrl-C `delay_s` after a stderr line starts
+    with `until`; returns (its stderr after that line, the log folder). Exit 130 is asserted."""
     import signal
 
     from host_tools import start_rodctl
 
     logs = tmp_path / "logs"
-    proc = start_rodctl("identify", "--port", "sim://", "--experiment", "release", "--experiment", "prbs", "--yes",
-                        "--settle", "60", "--log-dir", str(logs), "--out", str(tmp_path / "o.toml"))
+    proc = start_rodctl("identify", "--port", "sim://", "--experiment", "release", "--experiment", second, "--yes",
+                        "--settle", settle, "--log-dir", str(logs), "--out", str(tmp_path / "o.toml"))
     try:
         seen = []
-        for line in proc.stderr:  # the first experiment's log is complete; the rod is settling for the second
+        for line in proc.stderr:
             seen.append(line)
-            if line.startswith("  letting the rod settle"):
+            if line.startswith(until):
                 break
+        time.sleep(delay_s)
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=60)
     finally:
         proc.kill()
     assert proc.returncode == 130, "".join(seen) + err
+    return err, logs
+
+
+def test_ctrl_c_between_experiments_says_how_to_fit_the_logs_it_kept(tmp_path):
+    # the first experiment's log is complete; the rod is settling for the second
+    err, logs = _identify_interrupted(tmp_path, "prbs", "60", "  letting the rod settle")
     kept = [f for f in logs.glob("identify-*.csv") if not f.name.endswith(".events.csv")]
     assert len(kept) == 1 and kept[0].name.endswith("-release.csv")
     last = err.strip().splitlines()[-1]
@@ -392,25 +401,7 @@ def test_fitting_logs_skips_the_runs_that_did_not_play_to_their_end(tmp_path):
 
 
 def test_ctrl_c_mid_experiment_disarms_and_counts_only_the_complete_runs(tmp_path):
-    import signal
-
-    from host_tools import start_rodctl
-
-    logs = tmp_path / "logs"
-    proc = start_rodctl("identify", "--port", "sim://", "--experiment", "release", "--experiment", "chirp", "--yes",
-                        "--settle", "1", "--log-dir", str(logs), "--out", str(tmp_path / "o.toml"))
-    try:
-        seen = []
-        for line in proc.stderr:
-            seen.append(line)
-            if line.startswith("[2/2] chirp"):
-                break
-        time.sleep(1.5)  # the chirp is playing
-        proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        proc.kill()
-    assert proc.returncode == 130, "".join(seen) + err
+    err, logs = _identify_interrupted(tmp_path, "chirp", "1", "[2/2] chirp", delay_s=1.5)  # the chirp is playing
     last = err.strip().splitlines()[-1]
     assert last.startswith("rodctl: interrupted; the motor is off; 2 experiment logs kept (1 played to the end; "
                            "the fit skips the others): fit it with: rodctl identify "), last
