@@ -364,7 +364,9 @@ def _choose_compensation(args, identified):
         return choice
     print(f"friction compensation: {', '.join(f'{r:g}' for r in C.RATIOS)} x the identified Coulomb friction and "
           f"the nominal file's {1e3 * identified['lqr']['friction_compensation']:.2f} mN m, each judged by the "
-          f"robustness matrix ({args.compensation_cases}) on the identified rig", file=sys.stderr, flush=True)
+          f"robustness matrix ({args.compensation_cases}) on the identified rig with an ideal gearbox (the play's "
+          "lean would swamp the difference; the closing verdict keeps the play, so its counts differ)",
+          file=sys.stderr, flush=True)
     choice = C.choose(identified, cases=args.compensation_cases, jobs=args.jobs,
                       say=lambda line: print(f"friction compensation: {line}", file=sys.stderr, flush=True))
     for c in choice.candidates:

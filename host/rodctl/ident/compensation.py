@@ -110,7 +110,8 @@ class Choice:
     def comment_lines(self) -> list[str]:
         if self.note:
             return [f"rodctl identify: {self.note}"]
-        head = (f"rodctl identify: chosen by the robustness matrix ({self.cases}) on the identified rig, "
+        head = (f"rodctl identify: chosen by the robustness matrix ({self.cases}, an ideal gearbox: the play's lean "
+                f"would swamp the difference; the verdict keeps the play) on the identified rig, "
                 f"{self.best.ratio:.3g} x the identified Coulomb friction{self.best.with_weight(', with ')}; "
                 f"candidates:")
         return [head] + ["  " + c.line() for c in self.candidates]
