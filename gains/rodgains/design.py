@@ -56,9 +56,7 @@ def lean_torque(p: Params) -> float:
     motor never crosses the gap; with less play the crossing costs less than the lean. Measured
     (docs/sensors.md, "The gearbox's play"): upright without play 0.34 / 0.96 deg median mean / peak
     against 1.30 / 2.11 leaning; upright's peak grows with the play and meets the lean's at 0.3 to 0.35 deg."""
-    g, enc = p["gearbox"], p["encoder"]
-    play = g["backlash_deg"] if g["model"] == "compliant" and enc["location"] == "motor" else 0.0
-    return p["lqr"]["imu_flank_torque"] if play >= p["lqr"]["imu_lean_from_play_deg"] else 0.0
+    return p["lqr"]["imu_flank_torque"] if p.encoder_play_deg >= p["lqr"]["imu_lean_from_play_deg"] else 0.0
 
 
 class StateSpaces(NamedTuple):

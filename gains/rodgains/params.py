@@ -587,6 +587,14 @@ class Params:
         """One encoder count at the output shaft [rad] (2 pi / 979.2 for the default)."""
         return 2.0 * math.pi / float(self.counts_per_rev)
 
+    @property
+    def encoder_play_deg(self) -> float:
+        """The gearbox's play between the encoder and the rod [deg]: gearbox.backlash_deg with a compliant
+        gearbox and the encoder on the motor; 0 with a rigid one or the encoder on the output shaft."""
+        g = self.values["gearbox"]
+        on_motor = self.values["encoder"]["location"] == "motor"
+        return float(g["backlash_deg"]) if g["model"] == "compliant" and on_motor else 0.0
+
     # --- identity ---------------------------------------------------------------------
     def canonical_json(self) -> str:
         return json.dumps(self.values, sort_keys=True, separators=(",", ":"))

@@ -38,8 +38,7 @@ class Verdict:
     in_range_runs: int
     nominal: dict  # task -> the nominal run's row (settle_s, final_dev_deg, passed, ...)
     buckling_ratio: float  # the rod above the hub over its clamped buckling length [-]
-    backlash_deg: float  # the identified gearbox play (0: a rigid gearbox) [deg]
-    encoder_on_motor: bool
+    play_deg: float  # the identified gearbox play between the encoder and the rod (Params.encoder_play_deg) [deg]
     tip_imu: bool  # the design reads the tip IMU (sensors.tip_imu)
     failed: tuple[str, ...]  # "case/task" of every in-range run that failed
 
@@ -83,8 +82,8 @@ class Verdict:
         if self.buckling_ratio >= 1.0:
             steps.append(f"the rod is {self.buckling_ratio:.3f} x its clamped buckling length: it bends over whenever "
                          "the shaft holds still, and no gains change that; use a shorter or stiffer rod")
-        if not self.nominal_met and self.backlash_deg >= PLAY_FIRST_DEG and self.encoder_on_motor:
-            steps.append(f"the gearbox's play ({self.backlash_deg:.2f} deg identified) lies between the motor's "
+        if not self.nominal_met and self.play_deg >= PLAY_FIRST_DEG:
+            steps.append(f"the gearbox's play ({self.play_deg:.2f} deg identified) lies between the motor's "
                          "encoder and the rod, which leans on a flank the encoder cannot see: measure the rod side "
                          "(an encoder on the output shaft, encoder.location = \"output\"), or a gearbox with less "
                          "play (docs/control.md)")
@@ -131,12 +130,10 @@ def from_rows(rows: list[dict], params: Params, cases: str) -> Verdict:
     in_range = [r for r in rows if (r["case"], r["task"]) not in KNOWN_FAILURES and not buckled(r)]
     failed = tuple(f"{r['case']}/{r['task']}" for r in in_range if not r.get("passed"))
     nominal = {r["task"]: r for r in rows if r["case"] == "nominal"}
-    gear = params["gearbox"]
     return Verdict(cases=cases, passed=sum(1 for r in rows if r.get("passed")), runs=len(rows),
                    in_range_passed=len(in_range) - len(failed), in_range_runs=len(in_range), nominal=nominal,
                    buckling_ratio=clamped_ratio(params),
-                   backlash_deg=gear["backlash_deg"] if gear["model"] == "compliant" else 0.0,
-                   encoder_on_motor=params["encoder"]["location"] == "motor", tip_imu=params["sensors"]["tip_imu"],
+                   play_deg=params.encoder_play_deg, tip_imu=params["sensors"]["tip_imu"],
                    failed=failed)
 
 

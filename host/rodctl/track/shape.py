@@ -112,31 +112,29 @@ def spaced_chain(points: np.ndarray, hub: np.ndarray, markers: int, spacing_px: 
     diff = nodes[None, :, :] - nodes[:, None, :]  # diff[a, b] = b - a
     dist = np.hypot(diff[..., 0], diff[..., 1])
     unit = diff / np.maximum(dist, 1e-9)[..., None]
-    # turn_ok[k, j, l]: the link j->l does not turn back on k->j
-    turn_ok = np.einsum("kjc,jlc->kjl", unit, unit) > MAX_TURN_COS
+    # allowed[k, j, l]: from node j (reached from k) on to l: the link does not turn back on k->j, and l is
+    # neither the hub, nor k, nor j
+    allowed = np.einsum("kjc,jlc->kjl", unit, unit) > MAX_TURN_COS
+    idx = np.arange(n + 1)
+    allowed[:, :, 0] = False
+    allowed[idx, :, idx] = False
+    allowed[:, idx, idx] = False
+    # step[m - 1][j, l]: the link j->l as m spacings, a hidden marker for each beyond one
+    step = [((dist - m * spacing_px) / spacing_px) ** 2 + SKIP_COST * (m - 1) for m in (1, 2, 3)]
     inf = np.inf
     # cost[i][k, j]: the best chain whose marker i is node j, reached from node k
     cost = np.full((markers + 1, n + 1, n + 1), inf)
     back = np.full((markers + 1, n + 1, n + 1, 2), -1, np.int64)  # (index, node) of k's state
-    for j in range(1, n + 1):
-        for m in (1, 2, 3):
-            if m <= markers:
-                c = ((dist[0, j] - m * spacing_px) / spacing_px) ** 2 + SKIP_COST * (m - 1)
-                if c < cost[m, 0, j]:
-                    cost[m, 0, j] = c
+    for m in (1, 2, 3):
+        if m <= markers:
+            cost[m, 0, 1:] = step[m - 1][0, 1:]  # the first link, from the hub
     for i in range(1, markers):
         for m in (1, 2, 3):
             i2 = i + m
             if i2 > markers:
                 continue
-            step = ((dist - m * spacing_px) / spacing_px) ** 2 + SKIP_COST * (m - 1)  # [j, l]
-            # total[k, j, l] = cost[i][k, j] + step[j, l], where the turn is allowed and l is new
-            total = cost[i][:, :, None] + step[None, :, :]
-            total = np.where(turn_ok, total, inf)
-            idx = np.arange(n + 1)
-            total[:, :, 0] = inf  # never back to the hub
-            total[idx, :, idx] = inf  # never back to the previous node
-            total[:, idx, idx] = inf
+            # total[k, j, l] = cost[i][k, j] + step[j, l] where the link j->l is allowed
+            total = np.where(allowed, cost[i][:, :, None] + step[m - 1][None, :, :], inf)
             best_k = np.argmin(total, axis=0)  # [j, l]
             best = np.take_along_axis(total, best_k[None], axis=0)[0]
             better = best < cost[i2]
