@@ -316,6 +316,16 @@ def test_sim_log_is_not_replaced_without_force(tmp_path):
     assert out.read_text() == "precious\n"
 
 
+def test_sim_figure_named_is_not_replaced_without_force(tmp_path):
+    fig = tmp_path / "s.png"
+    fig.write_bytes(b"another run's figure")
+    r = run_rodctl("sim", "--scenario", "balance", "--duration", "0.2", "--no-log", "--plot", str(fig))
+    assert r.returncode == 2 and _one_line(r) == f"rodctl: --plot {fig} exists: choose another file name, or --force to replace it"
+    assert fig.read_bytes() == b"another run's figure"
+    r = run_rodctl("sim", "--scenario", "balance", "--duration", "0.2", "--no-log", "--plot", str(fig), "--force")
+    assert fig.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", r.stderr
+
+
 def test_the_device_design_is_identified_by_its_header_hash():
     committed = load_params(paths.COMMITTED_PARAMS)
     p, source = identify_params(committed.sha256())

@@ -125,6 +125,8 @@ def run_one(args, name: str, params, all_mode: bool = False):
         from rodctl.logs.writer import check_new
 
         check_new(log)
+    if plot is not None and not all_mode and args.plot and not args.force and plot.exists():  # nor an explicit --plot
+        raise InputError(f"--plot {plot} exists: choose another file name, or --force to replace it")
     prog = Progress(name)
     t0 = time.monotonic()
     try:
@@ -267,8 +269,8 @@ def register(sub) -> None:
     s.add_argument("--log", metavar="PATH", help="log to write, device log format (default: sim-NAME.csv)")
     s.add_argument("--no-plot", action="store_true", help="do not write the figure")
     s.add_argument("--no-log", action="store_true", help="do not write the log")
-    s.add_argument("--force", action="store_true", help="replace an existing --log (the default sim-NAME.csv "
-                   "is always replaced, like the figure)")
+    s.add_argument("--force", action="store_true", help="replace an existing --log or --plot (the defaults "
+                   "sim-NAME.csv and sim-NAME.png are always replaced)")
     s.add_argument("--plant", metavar="MODEL", help="the faithful plant's model: der or inextensible "
                    "(shorthand for --set plant.model=MODEL)")
     s.add_argument("--edges", type=int, metavar="N", help="the faithful plant's edges beyond the hub "
