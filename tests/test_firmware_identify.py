@@ -11,7 +11,7 @@ import pytest
 from firmware_sil import ACK, MODE, REASON, Dev, Sil, count_of
 from rodctl.link import protocol as P
 
-CHIRP, PRBS, STEPS, RELEASE = 1, 2, 3, 4
+CHIRP, PRBS, STEPS, RELEASE, SETTLE = 1, 2, 3, 4, 5
 DT = 1e-3
 
 
@@ -76,6 +76,20 @@ def test_release_is_a_pulse_then_zero_torque_with_the_driver_still_enabled():
     assert modes[499] == MODE["IDENTIFY"] and modes[500] == MODE["DISARMED"] and en[500] == 0
 
 
+def test_settle_is_a_sine_fading_linearly_to_nothing():
+    """The move between experiments: its strokes shrink each cycle, so the last ones are too weak to
+    move the rod against the dry friction."""
+    amp, dur, f = 0.01, 4.0, 0.5
+    u, en, modes = play(started(excitation=SETTLE, amplitude=amp, duration=dur, shape1=f))
+    n = round(dur / DT)
+    assert len(u) == n + 1 and modes[-1] == MODE["DISARMED"] and u[-1] == 0.0 and all(en[:n])
+    t = np.arange(n) * DT
+    expect = amp * (1 - t / dur) * np.sin(2 * np.pi * f * t)
+    assert np.max(np.abs(u[:n] - expect)) < 1e-3 * amp
+    peaks = [np.max(np.abs(u[k:k + 1000])) for k in range(0, n, 1000)]  # each half cycle's stroke [N m]
+    assert peaks[0] > 0.85 * amp and all(np.diff(peaks) < -0.2 * amp) and peaks[-1] < 0.15 * amp
+
+
 def test_zero_torque_while_moving_drives_the_back_emf_not_a_short():
     sil = started(excitation=RELEASE, amplitude=0.01, duration=1.0, shape1=0.001)
     for k in range(200):
@@ -94,6 +108,8 @@ def test_zero_torque_while_moving_drives_the_back_emf_not_a_short():
     dict(excitation=STEPS, amplitude=0.01, duration=1.0, shape1=2.0),               # hold longer than the run
     dict(excitation=RELEASE, amplitude=0.01, duration=1.0, shape1=1.0),             # no free swing left
     dict(excitation=RELEASE, amplitude=0.01, duration=float("nan"), shape1=0.1),
+    dict(excitation=SETTLE, amplitude=0.01, duration=1.0, shape1=0.0),             # no frequency
+    dict(excitation=SETTLE, amplitude=0.01, duration=1.0, shape1=501.0),           # beyond Nyquist
     dict(excitation=CHIRP, amplitude=0.01, duration=700.0, shape1=1.0, shape2=2.0),
     dict(excitation=9, amplitude=0.01, duration=1.0, shape1=0.1),
 ])

@@ -320,7 +320,8 @@ def test_python_encoders_reject_bad_messages():
 def test_enums_match_the_definition():
     assert P.MsgType.TELEMETRY == 0x01 and P.MsgType.HELLO_REQUEST == 0x15
     assert [m.name for m in P.Mode] == ["DISARMED", "BALANCE", "SWING_UP", "FAULT", "CATCH", "IDENTIFY"]
-    assert P.MsgType.IDENTIFY == 0x16 and [e.name for e in P.Excitation] == ["CHIRP", "PRBS", "STEPS", "RELEASE"]
+    assert P.MsgType.IDENTIFY == 0x16 and [e.name for e in P.Excitation] == ["CHIRP", "PRBS", "STEPS", "RELEASE",
+                                                                               "SETTLE"]
     assert P.Reason.OVERRUN == 7 and P.AckResult.BUSY == 5 and P.Param.HEARTBEAT_TIMEOUT == 5
     assert P.TelemetryFlag.HEARTBEAT_OK == 4
     assert P.PARAM_INFO[P.Param.TELEMETRY_DECIMATION].integer

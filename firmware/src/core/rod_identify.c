@@ -1,4 +1,4 @@
-/* rod_identify.c -- chirp, PRBS, steps and release, one torque per control period. */
+/* rod_identify.c -- chirp, PRBS, steps, release and settle, one torque per control period. */
 #include "rod_identify.h"
 
 #include <math.h>
@@ -55,6 +55,12 @@ bool rod_identify_start(rod_identify_t *id, const rod_identify_request_t *req)
             return false; /* a release needs some free swing after the pulse */
         }
         break;
+    case ROD_EXCITATION_SETTLE:
+        if (!(req->shape1 > 0.0f && req->shape1 <= nyquist_hz)) {
+            return false;
+        }
+        dphase0 = 2.0f * ROD_PI_F * req->shape1 * ROD_DT_S;
+        break;
     default:
         return false;
     }
@@ -88,8 +94,12 @@ float rod_identify_torque(rod_identify_t *id, bool *done)
     uint32_t k = id->k++;
     float a = id->req.amplitude;
     switch (id->req.excitation) {
-    case ROD_EXCITATION_CHIRP: {
+    case ROD_EXCITATION_CHIRP:
+    case ROD_EXCITATION_SETTLE: {
         float u = a * sinf(id->phase);
+        if (id->req.excitation == ROD_EXCITATION_SETTLE) {
+            u *= 1.0f - (float)k / (float)id->total; /* ddphase is 0: a fixed frequency */
+        }
         /* Wrapped every period: the phase grows to thousands of rad over a long chirp, where
          * float would lose the fine increments. */
         id->phase += id->dphase0 + ((float)k + 0.5f) * id->ddphase; /* midpoint: phi(k dt) exact */

@@ -11,6 +11,9 @@
  *            seed = the LFSR's start state, 0 taken as 1)
  *   STEPS    the levels +A, 0, -A, 0, ... each held for shape1 [s]
  *   RELEASE  +A for shape1 [s], then zero torque with the driver still enabled (free swing)
+ *   SETTLE   A (1 - t / duration) sin(2 pi shape1 t): a push to and fro that fades out, so the
+ *            rig ends at rest near hanging whatever the last experiment left swinging in the play
+ *            or held off hanging by the dry friction (played between experiments, not fitted)
  *
  * The excitation ends after `duration` [s]; rod_identify_torque then reports done.
  */
@@ -30,7 +33,7 @@ typedef struct {
     uint16_t seed;      /* PRBS LFSR start state */
     float amplitude;    /* [N m] */
     float duration;     /* [s] */
-    float shape1;       /* chirp f0 [Hz] | PRBS bit time [s] | step hold [s] | release pulse [s] */
+    float shape1;       /* chirp f0 [Hz] | PRBS bit time [s] | step hold [s] | release pulse [s] | settle frequency [Hz] */
     float shape2;       /* chirp f1 [Hz]; unused (0) otherwise */
 } rod_identify_request_t;
 

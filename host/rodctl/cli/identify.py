@@ -19,10 +19,9 @@ from rodctl.cli.outputs import check_output, make_folder
 REST_RATE_RAD_S = 0.05  # the rod counts as at rest below this base rate ...
 REST_HOLD_S = 0.5  # ... for this long
 REST_TIMEOUT_S = 20.0
-# The base stops long before the rod above it: its bending swing barely moves the count, so a still
-# count does not mean a straight rod. The fit starts every record from a straight rod at rest: over
-# sim:// on rig A, 4 s left enough sway to put the viscous friction -5.7 % off, 15 s -0.9 %.
-SETTLE_S = 15.0
+# After the settle move (experiments.settle_move) the rod is near rest; this wait lets what is left
+# of its sway die out before the next record starts (docs/identification.md).
+SETTLE_S = 2.0
 END_MARGIN_S = 3.0  # beyond the experiment's duration before the host gives up waiting
 # The default amplitudes are sized for the nominal rig; a livelier one (softer rod, less back-EMF
 # damping) can swing a chirp into the firmware's 60 deg limit and FAULT: 1 of 30 random rigs, whose
@@ -122,17 +121,19 @@ class SwingWatch:
             self.over = f"reached {w:.1f} rad/s (soft limit {self.speed_soft_rad_s:.1f} rad/s)"
 
 
-def run_experiment(session, exp, log_path: Path, params, params_source: str, watch: SwingWatch | None = None):
-    """Play one experiment while logging every frame; returns (log path, final telemetry). With a
-    `watch`, the experiment is stopped (DISARM) as soon as watch.over says the swing passed its soft
-    limit."""
+def run_experiment(session, exp, log_path: Path | None, params, params_source: str, watch: SwingWatch | None = None):
+    """Play one experiment while logging every frame to log_path (None: not logged, the settle move);
+    returns (log path, final telemetry). With a `watch`, the experiment is stopped (DISARM) as soon as
+    watch.over says the swing passed its soft limit."""
     from rodctl.link import protocol as P
     from rodctl.logs import LogWriter, device_metadata
 
-    meta = device_metadata(session.hello, port=session.port, params=params, params_source=params_source,
-                           start_unix=session.open_unix)
-    writer = LogWriter(log_path, meta, n=session.hello.n)
-    session.add_listener(writer, replay=False)
+    writer = None
+    if log_path is not None:
+        meta = device_metadata(session.hello, port=session.port, params=params, params_source=params_source,
+                               start_unix=session.open_unix)
+        writer = LogWriter(log_path, meta, n=session.hello.n)
+        session.add_listener(writer, replay=False)
     if watch is not None:
         session.add_listener(watch, replay=False)
     ended = "error"
@@ -150,7 +151,8 @@ def run_experiment(session, exp, log_path: Path, params, params_source: str, wat
                 ended = "stopped: " + watch.over
                 time.sleep(0.1)  # the frames already on their way
                 return log_path, session.telemetry
-            writer.maybe_flush()  # rows reach the file while the rod moves: a crash keeps them
+            if writer is not None:
+                writer.maybe_flush()  # rows reach the file while the rod moves: a crash keeps them
             last = session.telemetry
             if last is None:
                 continue
@@ -171,8 +173,9 @@ def run_experiment(session, exp, log_path: Path, params, params_source: str, wat
                 pass
         if watch is not None:
             session.remove_listener(watch)
-        session.remove_listener(writer)
-        writer.close({"end": ended, "experiment": exp.describe()})
+        if writer is not None:
+            session.remove_listener(writer)
+            writer.close({"end": ended, "experiment": exp.describe()})
 
 
 def run_port(args) -> int:
@@ -205,14 +208,32 @@ def run_port(args) -> int:
         return 130
 
 
+def _settle(session, settle, params, source: str, args) -> None:
+    """Play the settle move (not logged), then wait --settle seconds and for a still base."""
+    from rodctl.link import protocol as P
+    from rodctl.link.session import reason_text
+
+    watch = SwingWatch(params, args.soft_limit)
+    _, last = run_experiment(session, settle, None, params, source, watch)
+    if last.mode == P.Mode.FAULT:
+        raise UserError(f"settle move: safety limit tripped: {reason_text(last.reason)} ({P.Reason(last.reason).name}); "
+                        f"the motor is stopped (FAULT)")
+    if watch.over:
+        raise UserError(f"settle move: {watch.over}; motor stopped: is the rod free to swing, and hanging?")
+    _wait_rest(session, args.settle)
+
+
 def _run_and_fit(args, exps, log_dir: Path, stamp: str) -> int:
     from rodctl.cli.common import design_params, stop_signals
+    from rodctl.ident import experiments as E
     from rodctl.link import protocol as P
     from rodctl.link.session import Session, hello_counts_per_rev, reason_text
 
     logs = []
     with stop_signals(), Session(args.port) as session:
-        params, source = design_params(session, args)
+        # the rod the user measured (--params) is the fit's nominal rig, whatever gains the board was
+        # flashed with (the records are the duty it played); without it, the board's own file
+        params, source = (None, "") if args.params or args.overrides else design_params(session, args)
         if params is None:
             params, source = _nominal(args)
         h = session.hello
@@ -224,10 +245,16 @@ def _run_and_fit(args, exps, log_dir: Path, stamp: str) -> int:
             session.set("telemetry_decimation", 1)  # the fit replays every period's duty
         print(f"identify: {session.port}, firmware N={h.n} at {1e6 / h.period_us:g} Hz; nominal parameters: {source}",
               file=sys.stderr)
+        settle = E.settle_move(params)
         for i, exp in enumerate(exps, 1):
             for attempt in range(1, MAX_TRIES + 1):
-                _wait_rest(session, args.settle if i > 1 or attempt > 1 else 0.0)
-                _confirm(args, f"[{i}/{len(exps)}] {exp.describe()}")
+                # the first record starts from the rod the user hung still; every later one from where
+                # the last experiment left the rig, which the settle move brings back to rest
+                first = i == 1 and attempt == 1
+                _wait_rest(session)
+                _confirm(args, f"[{i}/{len(exps)}] {exp.describe()}" + ("" if first else f"\n  before it, {settle.describe()}"))
+                if not first:
+                    _settle(session, settle, params, source, args)
                 path = log_dir / f"identify-{stamp}-{exp.name}{'' if attempt == 1 else f'-{attempt}'}.csv"
                 watch = SwingWatch(params, args.soft_limit)
                 path, last = run_experiment(session, exp, path, params, source, watch)
@@ -467,7 +494,7 @@ def register(sub) -> None:
                         "gravity and its mounting tilt with the rod hanging, then its sign under a hand's turn; the "
                         "motor stays off. Exit 0 PASS, 1 FAIL (each failure names its fix)")
     p.add_argument("--settle", type=float, default=SETTLE_S, metavar="S",
-                   help=f"wait S seconds between experiments for the rod's swing to die out (default {SETTLE_S:g})")
+                   help=f"wait S seconds after the settle move between experiments (default {SETTLE_S:g})")
     p.add_argument("--scale", type=float, default=1.0, metavar="X",
                    help="multiply every experiment's torque amplitude (default 1: sized for the Table I rod)")
     p.add_argument("--soft-limit", type=float, default=SOFT_LIMIT_FRACTION, metavar="F",

@@ -12,6 +12,11 @@ hanging in IDENTIFY) and gives every fitted parameter something to see:
   chirp    a sweep through the pendulum and first bending frequencies (inertia, stiffness);
   prbs     broadband +-amplitude (inertia, viscous friction, torque constant);
   steps    +A, 0, -A, 0 levels: velocity reversals and coasting (Coulomb against viscous friction).
+
+Before each experiment the board plays `settle_move`, which is not fitted: a slow push to and fro that
+fades out, so that every record starts with the rod at rest near hanging. Without it a record starts
+where the last left the rig: the rod rattling in the gearbox's play, which the motor's encoder cannot
+see, or held off hanging and bent by the motor's dry friction (docs/identification.md).
 """
 
 from __future__ import annotations
@@ -48,9 +53,11 @@ class Experiment:
             what = f"a random +-{a} torque switching every {self.shape1 * 1e3:g} ms"
         elif e == P.Excitation.STEPS:
             what = f"torque steps +{a}, 0, -{a}, 0 held {self.shape1 * 1e3:g} ms each"
+        elif e == P.Excitation.SETTLE:
+            what = f"a {a} push to and fro at {self.shape1:g} Hz, fading out, to leave the rod at rest"
         else:
             what = f"a {a} push for {self.shape1 * 1e3:g} ms, then zero torque (driver on) while the rod swings freely"
-        return f"{self.name}: {what}, {self.duration:g} s"
+        return f"{self.name}: {what}, {self.duration:.3g} s"
 
     def command(self):
         return P.MESSAGE_CLASSES[P.MsgType.IDENTIFY](excitation=self.excitation, seed=self.seed,
@@ -71,6 +78,21 @@ DEFAULT_SEQUENCE = (
     Experiment("steps", int(P.Excitation.STEPS), 0.025, 3.0, 0.5),
 )
 EXPERIMENTS = {e.name: e for e in DEFAULT_SEQUENCE}
+
+
+# The settle move: well below the pendulum's frequency (about 1.2 Hz for Table I's rod), so the rod
+# follows the push; each stroke leaves it nearer hanging once the push no longer beats the dry
+# friction, and the last strokes are too weak to move it.
+SETTLE_HZ = 0.3
+SETTLE_CYCLES = 5
+SETTLE_FRICTION_MULTIPLE = 2.0  # its first strokes: this many times the file's dry friction ...
+SETTLE_MIN_NM = 0.01  # ... and at least this much
+
+
+def settle_move(params) -> Experiment:
+    """The move that brings the rig to rest near hanging before an experiment, for this file's rig."""
+    amp = max(SETTLE_MIN_NM, SETTLE_FRICTION_MULTIPLE * float(params["motor"]["coulomb_friction"]))
+    return Experiment("settle", int(P.Excitation.SETTLE), amp, SETTLE_CYCLES / SETTLE_HZ, SETTLE_HZ)
 
 
 def select(names: list[str] | None) -> list[Experiment]:
@@ -196,3 +218,17 @@ def run_sil(exp: Experiment, sil, plant, settle: float = 0.0) -> Record:
                   log["duty"][:k_end].astype(float), log["torque_cmd"][:k_end].astype(float),
                   est[:k_end, -1].astype(float) if est.size else np.zeros(k_end),
                   end_reason=int(lib.rod_sil_reason()), ended_in=int(log["mode"][k_end]) if k_end < len(ident) else 5)
+
+
+def run_sil_sequence(exps, sil, plant, params, rest: float) -> list[Record]:
+    """Play `exps` one after the other on one plant, as `rodctl identify` does on a board: before each
+    but the first, the settle move and `rest` seconds with the board disarmed."""
+    from rodctl.sim.plant import run_closed_loop
+
+    out = []
+    for exp in exps:
+        if out:
+            run_sil(settle_move(params), sil, plant)
+            run_closed_loop(plant, sil, int(round(rest / plant.params.dt)), reset=False)
+        out.append(run_sil(exp, sil, plant))
+    return out

@@ -3,8 +3,12 @@
 Model: the plant the parameter file describes (sim.plant.faithful_plant: its [plant] table, Coulomb
 friction, hub), driven by the duty each logged period held (the firmware's own translation of its
 torque command, so the fit sees the driver, back-EMF and current limit as the rig did), started at
-rest at the first logged angle. The residual is simulated minus measured theta_1 at every control
-period, in units of the encoder's quantization noise (one count / sqrt(12)).
+rest at the first logged count (`set_start`). The residual is simulated minus measured theta_1 at
+every control period, in units of the encoder's quantization noise (one count / sqrt(12)).
+
+Where in its first count each record starts is one more unknown per record (`start_counts`): a
+record starts where the last left the rig, and a tenth of a degree there (a quarter count) moved the
+viscous friction by 6 % on a matched plant (docs/identification.md).
 
 Fitted (FIT_PARAMS): rotor inertia, viscous and Coulomb friction, a torque-constant scale (k_t and
 k_e together: equal in SI units), and the rod's Young's modulus and damping. Length, width,
@@ -41,6 +45,7 @@ UNIDENTIFIABLE_REL_CI = 0.5  # a 95 % half-width beyond 50 % of the value: not i
 # (`polish` in fit()), which brought those rigs within 1.5 % (docs/identification.md).
 FAST_MODEL_EDGES = 20
 POLISH_NFEV = 30  # simulations the polish may take: it starts next to the optimum
+STEP = 1e-4  # forward-difference step, relative to max(1, |x|) in the optimizer's scaled units
 STILL_WINDOW = 25  # periods each side: a sample whose count did not change within them is "still"
 
 
@@ -116,7 +121,9 @@ class Simulator:
         self._torque = [np.ascontiguousarray(r.torque, np.float32) for r in records]
         self._ctl = replay_controller()
 
-    def run(self, params) -> list[np.ndarray]:
+    def run(self, params, starts: np.ndarray | None = None) -> list[np.ndarray]:
+        """theta_1 as the encoder would read it, per record. starts: where each record's encoder side
+        starts within its first count [counts, -0.5 to 0.5] (None: in its middle)."""
         import ctypes
 
         from rodctl.sim.plant import SimulationError, faithful_plant, run_closed_loop
@@ -126,10 +133,10 @@ class Simulator:
         zero = math.radians(params["encoder"]["zero_error_deg"])
         out = []
         fp = ctypes.POINTER(ctypes.c_float)
-        for r, duty, torque in zip(self.records, self._duty, self._torque):
-            # at rest at the first count: the rod straight there, the motor side in the middle of the gap
-            theta0 = 2 * math.pi * r.count[0] / cpr - zero
-            plant.set_state(np.full(plant.N, theta0))
+        for i, (r, duty, torque) in enumerate(zip(self.records, self._duty, self._torque)):
+            within = 0.0 if starts is None else float(starts[i])
+            theta0 = 2 * math.pi * (r.count[0] + within) / cpr - zero
+            set_start(plant, theta0)
             plant.time = 0.0
             self._ctl.lib.rod_replay_load(duty.ctypes.data_as(fp), torque.ctypes.data_as(fp), len(duty),
                                           ctypes.c_float(r.period))
@@ -141,6 +148,24 @@ class Simulator:
                 th = np.full(len(duty), theta0 + 10.0)
             out.append(th)
         return out
+
+
+def set_start(plant, theta_enc: float) -> None:
+    """The rig at rest with its encoder side at theta_enc [rad, zero removed], the rod straight.
+
+    The rod hangs wherever the play lets it: straight down if the gap around the motor side reaches
+    that far, otherwise against the nearer flank, where the motor's dry friction holds it. A record
+    starts where the last experiment left the rig, most often with the motor on a flank and the rod
+    a few tenths of a degree off hanging; starting the rod at the encoder's angle instead puts it up
+    to half the gap off its rest, and the fit then tunes the friction to a swing the rig never made.
+    With the encoder on the output shaft (or no gearbox) the rod is where the encoder says."""
+    c = plant.config
+    if not c.compliant or c.encoder_on_shaft:
+        plant.set_state(np.full(plant.N, theta_enc))
+        return
+    half = 0.5 * c.backlash
+    plant.set_state(np.full(plant.N, min(max(0.0, theta_enc - half), theta_enc + half)))
+    plant.set_motor_state(theta_enc)
 
 
 _REPLAY = None
@@ -234,6 +259,7 @@ class FitResult:
     period: float = 1e-3
     counts_per_rev: float = 979.2
     model: tuple[str, ...] = ()
+    start_counts: list[float] = field(default_factory=list)  # each record's start within its first count [counts]
 
 
 def _scales(nominal: dict[str, float]) -> dict[str, float]:
@@ -267,31 +293,54 @@ def fit(records: list[Record], params, *, fitted: tuple[str, ...] = NAMES, start
     use = [moving_mask(r.count)[:k] for r, k in zip(records, split)]
     sim = Simulator(records)
     evals = [0]
+    pg, nr = len(fps), len(records)
+    rows = [int(u.sum()) for u in use]
+    row_of = np.repeat(np.arange(nr), rows)  # the record each residual row comes from
 
     def values_of(x) -> dict[str, float]:
         v = dict(nominal)
-        v.update({fp.name: float(xi) * scale[fp.name] for fp, xi in zip(fps, x)})
+        v.update({fp.name: float(xi) * scale[fp.name] for fp, xi in zip(fps, x[:pg])})
         return v
 
     def simulate(x) -> list[np.ndarray]:
         evals[0] += 1
-        return sim.run(with_values(params, values_of(x)).with_overrides(*model))
+        return sim.run(with_values(params, values_of(x)).with_overrides(*model), starts=x[pg:])
 
     def residual(x) -> np.ndarray:
         th = simulate(x)
         return np.concatenate([(s[:k] - m[:k])[u] / q for s, m, k, u in zip(th, meas, split, use)])
 
-    lo = np.array([fp.bounds[0] / scale[fp.name] for fp in fps])
-    hi = np.array([fp.bounds[1] / scale[fp.name] for fp in fps])
-    x_nom = np.clip(np.array([nominal[fp.name] / scale[fp.name] for fp in fps]), lo, hi)
+    def jacobian(x) -> np.ndarray:
+        """Forward differences; the records' own start places share one simulation (each moves
+        only its own record's rows)."""
+        f0 = residual(x)
+        J = np.empty((len(f0), len(x)))
+        h = np.where(x + STEP * np.maximum(1.0, np.abs(x)) <= hi, 1.0, -1.0) * STEP * np.maximum(1.0, np.abs(x))
+        for j in range(pg):
+            xj = x.copy()
+            xj[j] += h[j]
+            J[:, j] = (residual(xj) - f0) / h[j]
+        xs = x.copy()
+        xs[pg:] += h[pg:]
+        d = residual(xs) - f0
+        J[:, pg:] = 0.0
+        J[np.arange(len(f0)), pg + row_of] = d / h[pg + row_of]
+        return J
+
+    # Each record's encoder side starts somewhere in its first count: one unknown per record.
+    lo = np.array([fp.bounds[0] / scale[fp.name] for fp in fps] + [-0.5] * nr)
+    hi = np.array([fp.bounds[1] / scale[fp.name] for fp in fps] + [0.5] * nr)
+    x_nom = np.clip(np.array([nominal[fp.name] / scale[fp.name] for fp in fps] + [0.0] * nr), lo, hi)
     # Deterministic starts: the nominal point, then every parameter low, then high (rotor and rod
     # guesses are often off by tens of percent, the friction terms by factors).
-    candidates = [x_nom, np.clip(x_nom * 0.6, lo, hi), np.clip(x_nom * 1.6, lo, hi)]
+    low, high = x_nom.copy(), x_nom.copy()
+    low[:pg], high[:pg] = x_nom[:pg] * 0.6, x_nom[:pg] * 1.6
+    candidates = [x_nom, np.clip(low, lo, hi), np.clip(high, lo, hi)]
     tried = []
 
     def solve(kind: str, x0, nfev: int):
-        r = least_squares(residual, x0, bounds=(lo, hi), x_scale=np.maximum(x0, 0.05), diff_step=1e-4,
-                          max_nfev=nfev, method="trf")
+        x_scale = np.concatenate([np.maximum(x0[:pg], 0.05), np.full(nr, 0.25)])
+        r = least_squares(residual, x0, jac=jacobian, bounds=(lo, hi), x_scale=x_scale, max_nfev=nfev, method="trf")
         tried.append({kind: {fp.name: float(a * scale[fp.name]) for fp, a in zip(fps, x0)},
                       "cost": float(r.cost), "nfev": int(r.nfev)})
         return r
@@ -309,15 +358,18 @@ def fit(records: list[Record], params, *, fitted: tuple[str, ...] = NAMES, start
             progress("fit: polish on the parameter file's plant")
         best = solve("polish", best.x, POLISH_NFEV)
     x = best.x
-    J = best.jac
-    m, p = J.shape
-    s2 = 2 * best.cost / max(1, m - p)
+    J = np.asarray(best.jac)
+    m = J.shape[0]
+    s2 = 2 * best.cost / max(1, m - J.shape[1])
+    # the intervals allow for the records' start places (the whole covariance's block); the
+    # identifiability is the fitted parameters' own
+    cov = (s2 * np.linalg.pinv(J.T @ J))[:pg, :pg]
+    J = J[:, :pg]
+    p = pg
     jn = np.linalg.norm(J, axis=0)
     jn_safe = np.where(jn > 0, jn, 1.0)
     Js = J / jn_safe
     sv = np.linalg.svd(Js, compute_uv=False)
-    JtJ = J.T @ J
-    cov = s2 * np.linalg.pinv(JtJ)
     sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
     corr = cov / np.outer(np.where(sd > 0, sd, 1), np.where(sd > 0, sd, 1))
     values = values_of(x)
@@ -357,7 +409,7 @@ def fit(records: list[Record], params, *, fitted: tuple[str, ...] = NAMES, start
         fit_pct=percent_fit(fit_m, fit_s), rms_counts=float(np.sqrt(2 * best.cost / m) * q * cpr / (2 * math.pi)),
         starts=tried, seconds=time.monotonic() - t0, evaluations=evals[0], theta_meas=meas, theta_sim=th,
         split=split, record_names=[r.name for r in records], period=records[0].period, counts_per_rev=cpr,
-        model=model)
+        model=model, start_counts=[float(v) for v in x[pg:]])
 
 
 def identifiability_text(res: FitResult) -> list[str]:
