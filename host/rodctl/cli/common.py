@@ -30,10 +30,10 @@ def add_port_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", metavar="PORT", help=PORT_HELP)
 
 
-def add_design_args(p: argparse.ArgumentParser) -> None:
+def add_design_args(p: argparse.ArgumentParser, params_help: str | None = None) -> None:
     p.add_argument("--params", metavar="FILE",
-                   help="parameter file the firmware may have been built from (identifies the design by its hash); "
-                        "with --port sim:// it also builds the virtual board's firmware and plant")
+                   help=params_help or "parameter file the firmware may have been built from (identifies the design by "
+                        "its hash); with --port sim:// it also builds the virtual board's firmware and plant")
     p.add_argument("--set", metavar="SECTION.KEY=VALUE", action="append", default=[], dest="overrides",
                    help="override one parameter of --params (repeatable)")
 

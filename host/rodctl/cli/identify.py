@@ -208,18 +208,20 @@ def run_port(args) -> int:
         return 130
 
 
-def _settle(session, settle, params, source: str, args) -> None:
-    """Play the settle move (not logged), then wait --settle seconds and for a still base."""
+def _settle(session, settle, limits, source: str, args, log_dir: Path) -> None:
+    """Play the settle move (not logged; `limits`: the parameters whose safety limits the watch uses), then
+    wait --settle seconds and for a still base."""
     from rodctl.link import protocol as P
     from rodctl.link.session import reason_text
 
-    watch = SwingWatch(params, args.soft_limit)
-    _, last = run_experiment(session, settle, None, params, source, watch)
+    watch = SwingWatch(limits, args.soft_limit)
+    _, last = run_experiment(session, settle, None, limits, source, watch)
     if last.mode == P.Mode.FAULT:
         raise UserError(f"settle move: safety limit tripped: {reason_text(last.reason)} ({P.Reason(last.reason).name}); "
-                        f"the motor is stopped (FAULT)")
+                        f"the motor is stopped (FAULT); the logs so far are in {log_dir}")
     if watch.over:
-        raise UserError(f"settle move: {watch.over}; motor stopped: is the rod free to swing, and hanging?")
+        raise UserError(f"settle move: {watch.over}; motor stopped: is the rod free to swing, and hanging? "
+                        f"The logs so far are in {log_dir}")
     _wait_rest(session, args.settle)
 
 
@@ -232,10 +234,13 @@ def _run_and_fit(args, exps, log_dir: Path, stamp: str) -> int:
     logs = []
     with stop_signals(), Session(args.port) as session:
         # the rod the user measured (--params) is the fit's nominal rig, whatever gains the board was
-        # flashed with (the records are the duty it played); without it, the board's own file
-        params, source = (None, "") if args.params or args.overrides else design_params(session, args)
+        # flashed with (the records are the duty it played); without it, the board's own file. The
+        # soft limits are the board's own, when its file is known.
+        board, board_source = design_params(session, args)
+        params, source = _nominal(args) if args.params or args.overrides else (board, board_source)
         if params is None:
             params, source = _nominal(args)
+        limits = board or params
         h = session.hello
         # the board reduces counts with its own counts per turn (a rig setting); the fit reads them the same way
         board_counts = hello_counts_per_rev(h)
@@ -251,12 +256,12 @@ def _run_and_fit(args, exps, log_dir: Path, stamp: str) -> int:
                 # the first record starts from the rod the user hung still; every later one from where
                 # the last experiment left the rig, which the settle move brings back to rest
                 first = i == 1 and attempt == 1
-                _wait_rest(session)
+                _wait_rest(session)  # a stopped experiment leaves the rod swinging: the settle move starts from rest
                 _confirm(args, f"[{i}/{len(exps)}] {exp.describe()}" + ("" if first else f"\n  before it, {settle.describe()}"))
                 if not first:
-                    _settle(session, settle, params, source, args)
+                    _settle(session, settle, limits, source, args, log_dir)
                 path = log_dir / f"identify-{stamp}-{exp.name}{'' if attempt == 1 else f'-{attempt}'}.csv"
-                watch = SwingWatch(params, args.soft_limit)
+                watch = SwingWatch(limits, args.soft_limit)
                 path, last = run_experiment(session, exp, path, params, source, watch)
                 if last.mode == P.Mode.FAULT:
                     # a livelier rig than the amplitudes were sized for (softer rod, weaker back-EMF damping)
@@ -513,5 +518,7 @@ def register(sub) -> None:
                         "too), or none to keep the nominal file's (default matrix); the closing verdict runs the same set on the "
                         "identified rig with its gearbox (with none: the nominal runs only)")
     p.add_argument("--jobs", type=int, metavar="N", help="worker processes for that choice (default: every core)")
-    add_design_args(p)
+    add_design_args(p, "your rig's parameter file, with the rod you measured (length, width, thickness, density): "
+                       "the fit's nominal rig, whatever file the board was built from; with --port sim:// it also "
+                       "builds the virtual board's firmware and plant")
     p.set_defaults(func=run_identify)

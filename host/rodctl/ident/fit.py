@@ -164,7 +164,8 @@ def set_start(plant, theta_enc: float) -> None:
         plant.set_state(np.full(plant.N, theta_enc))
         return
     half = 0.5 * c.backlash
-    plant.set_state(np.full(plant.N, min(max(0.0, theta_enc - half), theta_enc + half)))
+    hanging = 2.0 * math.pi * round(theta_enc / (2.0 * math.pi))  # the count may be turns from the boot zero
+    plant.set_state(np.full(plant.N, min(max(hanging, theta_enc - half), theta_enc + half)))
     plant.set_motor_state(theta_enc)
 
 
@@ -306,9 +307,15 @@ def fit(records: list[Record], params, *, fitted: tuple[str, ...] = NAMES, start
         evals[0] += 1
         return sim.run(with_values(params, values_of(x)).with_overrides(*model), starts=x[pg:])
 
+    last = [None, None]  # least_squares asks for the Jacobian where it has just evaluated the residual
+
     def residual(x) -> np.ndarray:
+        if last[0] is not None and np.array_equal(last[0], x):
+            return last[1].copy()
         th = simulate(x)
-        return np.concatenate([(s[:k] - m[:k])[u] / q for s, m, k, u in zip(th, meas, split, use)])
+        r = np.concatenate([(s[:k] - m[:k])[u] / q for s, m, k, u in zip(th, meas, split, use)])
+        last[0], last[1] = np.array(x, copy=True), r
+        return r.copy()
 
     def jacobian(x) -> np.ndarray:
         """Forward differences; the records' own start places share one simulation (each moves
