@@ -237,9 +237,8 @@ def _run_and_fit(args, exps, log_dir: Path, stamp: str) -> int:
         # flashed with (the records are the duty it played); without it, the board's own file. The
         # soft limits are the board's own, when its file is known.
         board, board_source = design_params(session, args)
-        params, source = _nominal(args) if args.params or args.overrides else (board, board_source)
-        if params is None:
-            params, source = _nominal(args)
+        explicit = bool(args.params or args.overrides)
+        params, source = (board, board_source) if board is not None and not explicit else _nominal(args)
         limits = board or params
         h = session.hello
         # the board reduces counts with its own counts per turn (a rig setting); the fit reads them the same way

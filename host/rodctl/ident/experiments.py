@@ -13,7 +13,7 @@ hanging in IDENTIFY) and gives every fitted parameter something to see:
   prbs     broadband +-amplitude (inertia, viscous friction, torque constant);
   steps    +A, 0, -A, 0 levels: velocity reversals and coasting (Coulomb against viscous friction).
 
-Before each experiment the board plays `settle_move`, which is not fitted: a slow push to and fro that
+Before each experiment but the first the board plays `settle_move`, which is not fitted: a slow push to and fro that
 fades out, so that every record starts with the rod at rest near hanging. Without it a record starts
 where the last left the rig: the rod rattling in the gearbox's play, which the motor's encoder cannot
 see, or held off hanging and bent by the motor's dry friction (docs/identification.md).
@@ -191,7 +191,7 @@ def records_from_log(path: str | Path, period: float | None = None) -> tuple[dic
 # ---- the same experiment through the SIL (tests, benchmarks, `rodctl identify` acceptance) ----------
 
 
-def run_sil(exp: Experiment, sil, plant, settle: float = 0.0) -> Record:
+def run_sil(exp: Experiment, sil, plant) -> Record:
     """Play `exp` with the firmware's SIL library (rod_sil_identify) against `plant` (duty input), from
     the plant's current state; the record ends where IDENTIFY ends (end, or a safety trip)."""
     from rodctl.sim.plant import run_closed_loop

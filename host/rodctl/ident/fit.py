@@ -322,7 +322,8 @@ def fit(records: list[Record], params, *, fitted: tuple[str, ...] = NAMES, start
         only its own record's rows)."""
         f0 = residual(x)
         J = np.empty((len(f0), len(x)))
-        h = np.where(x + STEP * np.maximum(1.0, np.abs(x)) <= hi, 1.0, -1.0) * STEP * np.maximum(1.0, np.abs(x))
+        step = STEP * np.maximum(1.0, np.abs(x))
+        h = np.where(x + step <= hi, step, -step)
         for j in range(pg):
             xj = x.copy()
             xj[j] += h[j]
