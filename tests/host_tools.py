@@ -26,10 +26,10 @@ def rodctl_env(**extra) -> dict:
     return env
 
 
-def run_rodctl(*args, timeout: float = 120, env: dict | None = None, input: str | None = None):
-    """Run `rodctl ARGS` in a subprocess; returns CompletedProcess (text)."""
+def run_rodctl(*args, timeout: float = 120, env: dict | None = None, input: str | None = None, cwd=None):
+    """Run `rodctl ARGS` in a subprocess (in folder cwd); returns CompletedProcess (text)."""
     return subprocess.run([*RODCTL, *args], capture_output=True, text=True, timeout=timeout,
-                          env=env or rodctl_env(), input=input)
+                          env=env or rodctl_env(), input=input, cwd=cwd)
 
 
 def ctrl_c_as_at_a_terminal() -> None:

@@ -372,3 +372,59 @@ def test_a_parameter_file_that_is_empty_or_misspelled_is_named(tmp_path, text, s
     r = run_rodctl("status", "--port", f"sim://?plant={f}")
     assert r.returncode == 2
     assert _one_line(r) == "rodctl: sim://: " + says.format(f=f)
+
+
+def _a_log(tmp_path):
+    log = tmp_path / "run.csv"
+    r = run_rodctl("sim", "--scenario", "balance", "--duration", "0.2", "--no-plot", "--log", str(log))
+    assert r.returncode == 0, r.stderr
+    return log
+
+
+@pytest.mark.parametrize("argv, kept, message", [
+    # the user's own parameter file is never the header's parameter copy, --force or not
+    (["gains", "--params", "{tmp}/mine.toml", "--header", "{tmp}/mine.h"], "mine.toml",
+     "--header: would write {tmp}/mine.toml, which is an input of this command; choose another name"),
+    (["gains", "--params", "{tmp}/mine.toml", "--header", "{tmp}/mine.h", "--force"], "mine.toml",
+     "--header: would write {tmp}/mine.toml, which is an input of this command; choose another name"),
+    (["gains", "--header", "{tmp}/other.h"], "other.toml",
+     "--header {tmp}/other.toml exists and is not a file rodctl generated; pass --force to overwrite"),
+    (["gains", "--json", "{tmp}/d.json"], "d.json", "--json {tmp}/d.json exists; pass --force"),
+    (["sil-lib", "-o", "{tmp}/lib.so"], "lib.so", "--output {tmp}/lib.so exists; pass --force"),
+    (["plot", "LOG", "--out", "{tmp}/p.png"], "p.png", "--out {tmp}/p.png exists; pass --force"),
+])
+def test_a_file_the_user_has_is_not_replaced(tmp_path, argv, kept, message):
+    log = _a_log(tmp_path) if "LOG" in argv else None
+    if kept == "mine.toml":
+        r = run_rodctl("params", "--set", "rod.edges=6", "--out", str(tmp_path / "mine.toml"))
+        assert r.returncode == 0, r.stderr
+    else:
+        (tmp_path / kept).write_text("mine\n")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    argv = [str(log) if a == "LOG" else a.format(tmp=tmp_path) for a in argv]
+    r = run_rodctl(*argv, timeout=300)
+    assert r.returncode == 2 and message.format(tmp=tmp_path) in _one_line(r), r.stderr
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_a_generated_header_is_regenerated_and_force_replaces_a_users_file(tmp_path):
+    (tmp_path / "other.toml").write_text("mine\n")
+    r = run_rodctl("gains", "--header", str(tmp_path / "other.h"), "--force", timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "DO NOT EDIT" in (tmp_path / "other.toml").read_text().splitlines()[0]
+    r = run_rodctl("gains", "--header", str(tmp_path / "other.h"), timeout=300)  # the regenerate line, as it is
+    assert r.returncode == 0, r.stderr
+
+
+@pytest.mark.parametrize("argv, line", [
+    (["plot"], "rodctl: name a log to plot (rodctl plot run.csv), or --live --port PORT"),
+    (["plot", "run.csv", "--live"], "rodctl: --live opens the scope of a board, not a log: drop run.csv or --live"),
+    (["protocol", "--root", "/nonexistent"],
+     "rodctl: --root /nonexistent: no protocol definition at /nonexistent/firmware/protocol/rodlink.toml"),
+    (["sweep", "--grid", "rod.length=0.1:0.2:1e-9", "--out", "s.parquet"],
+     "rodctl: --grid rod.length=0.1:0.2:1e-9: 100,000,001 points on one axis (at most 1,000,000); use a larger step"),
+])
+def test_more_bad_input_is_exit_2(tmp_path, argv, line):
+    r = run_rodctl(*argv, cwd=tmp_path)
+    assert r.returncode == 2 and _one_line(r) == line
+    assert list(tmp_path.iterdir()) == []

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -168,8 +169,9 @@ def test_a_killed_mcap_log_keeps_its_finished_chunks(tmp_path):
     assert np.array_equal(data["seq_count"], np.arange(1, len(data) + 1))
 
 
+@pytest.mark.parametrize("command", ["plot", "log-convert"])
 @pytest.mark.parametrize("fmt", ["csv", "mcap"])
-def test_plotting_a_cut_log_says_how_much_was_readable(tmp_path, fmt):
+def test_plotting_or_converting_a_cut_log_says_how_much_was_readable(tmp_path, fmt, command):
     from host_tools import run_rodctl
 
     path = tmp_path / f"cut.{fmt}"
@@ -180,14 +182,17 @@ def test_plotting_a_cut_log_says_how_much_was_readable(tmp_path, fmt):
     raw = path.read_bytes()
     path.write_bytes(raw[:-37] if fmt == "csv" else raw[: len(raw) - 100])
     n = len(read_log(path).data)
-    r = run_rodctl("plot", str(path), "--out", str(tmp_path / "p.png"))
+    out = {"plot": "p.png", "log-convert": "p.parquet"}[command]
+    r = run_rodctl(command, str(path), "--out", str(tmp_path / out))
     assert r.returncode == 0, r.stderr
     warning = [ln for ln in r.stderr.splitlines() if ln.startswith("warning: ")]
     assert len(warning) == 1 and "cut short" in warning[0] and f"{n} telemetry frames readable" in warning[0]
     assert "no trailer" in warning[0]
+    if command == "log-convert":
+        assert len(read_log(tmp_path / out).data) == n
     whole = tmp_path / f"whole.{fmt}"
     _write(whole).close({"frames": 300})
-    r = run_rodctl("plot", str(whole), "--out", str(tmp_path / "q.png"))
+    r = run_rodctl(command, str(whole), "--out", str(tmp_path / ("q" + Path(out).suffix)))
     assert r.returncode == 0 and "warning" not in r.stderr, r.stderr
 
 
@@ -308,12 +313,12 @@ def test_an_existing_log_is_not_replaced_without_force(tmp_path):
     assert len(read_log(out).data) > 300
 
 
-def test_sim_log_is_not_replaced_without_force(tmp_path):
-    out = tmp_path / "s.csv"
-    out.write_text("precious\n")
-    r = run_rodctl("sim", "--scenario", "balance", "--duration", "0.2", "--no-plot", "--log", str(out))
-    assert r.returncode == 2 and "exists" in _one_line(r)
-    assert out.read_text() == "precious\n"
+@pytest.mark.parametrize("existing", ["s.csv", "s.truth.csv"])
+def test_sim_log_is_not_replaced_without_force(tmp_path, existing):
+    (tmp_path / existing).write_text("precious\n")
+    r = run_rodctl("sim", "--scenario", "balance", "--duration", "0.2", "--no-plot", "--log", str(tmp_path / "s.csv"))
+    assert r.returncode == 2 and f"{existing} exists" in _one_line(r)
+    assert [p.name for p in tmp_path.iterdir()] == [existing] and (tmp_path / existing).read_text() == "precious\n"
 
 
 def test_sim_figure_named_is_not_replaced_without_force(tmp_path):

@@ -162,16 +162,29 @@ def test_a_video_without_the_markers_is_refused(filmed, tmp_path):
     (["VIDEO", "--log", "LOG", "--out", "x.csv"], "the tracked log is Parquet"),
     (["VIDEO", "--log", "LOG", "--markers", "1"], "--markers 1: between 2 and 64"),
     (["LOG", "--log", "LOG"], "OpenCV cannot read it as a video"),
+    (["VIDEO", "--log", "LOG", "--calibrate", "VIDEO", "--board", "2x2"], "--board '2x2': at least 3x3 inner corners"),
+    (["VIDEO", "--log", "FOLDER"], "is a folder, not a file"),
 ])
 def test_bad_input_is_one_line_and_exit_2(filmed, tmp_path, args, message):
     d = filmed[60]
-    args = [str(d["video"]) if a == "VIDEO" else str(d["log"]) if a == "LOG" else a for a in args]
+    args = [str(d["video"]) if a == "VIDEO" else str(d["log"]) if a == "LOG" else str(tmp_path) if a == "FOLDER"
+            else a for a in args]
     if "--out" not in args:
         args += ["--out", str(tmp_path / "t.parquet")]
     r = run_rodctl("track", *args, "--quiet", timeout=120)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert message in r.stderr
     assert not (tmp_path / "t.parquet").exists()
+
+
+@pytest.mark.parametrize("existing", ["t.parquet", "t.mcap", "t.png"])
+def test_existing_outputs_are_kept_without_force(filmed, tmp_path, existing):
+    d = filmed[60]
+    (tmp_path / existing).write_text("mine")
+    r = run_rodctl("track", str(d["video"]), "--log", str(d["log"]), "--out", str(tmp_path / "t.parquet"),
+                   "--plot", str(tmp_path / "t.png"), "--quiet", timeout=120)
+    assert r.returncode == 2 and "pass --force" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == [existing] and (tmp_path / existing).read_text() == "mine"
 
 
 # --- clips made from the 120 fps one with OpenCV (read, change, write again as MP4) ----------------------

@@ -12,7 +12,7 @@ from rodgains.errors import InputError
 from rodgains.params import DEFAULT_PARAMS, Params, load_params
 
 from rodctl import paths
-from rodctl.cli.outputs import check_name, check_output, check_output_folder, make_folder
+from rodctl.cli.outputs import check_name, check_output, check_output_folder, check_regenerable, make_folder
 
 
 def add_param_args(p: argparse.ArgumentParser) -> None:
@@ -90,7 +90,8 @@ def run_gains(args) -> int:
     # `is not None`: an empty name (an unset shell variable) is refused, never taken for "not given",
     # which would write the committed header in the checkout
     if args.json is not None:
-        check_output(args.json, "--json")
+        check_output(args.json, "--json", force=args.force)
+        check_regenerable(args.json, "--json", force=True, inputs=(args.params,))
     if args.header is not None:
         check_name(args.header, "--header")
     elif not (args.report or args.json or args.check):
@@ -98,6 +99,9 @@ def run_gains(args) -> int:
     if (args.header or not (args.report or args.json)) and not args.check:  # the header will be written
         header = Path(args.header) if args.header else paths.COMMITTED_HEADER
         check_output_folder(header.parent, f"--header {header}")
+        # the header and its parameter copy beside it replace earlier ones, never a user's own file
+        for f in (header, header.with_suffix(".toml")):
+            check_regenerable(f, "--header", force=args.force, inputs=(args.params,))
     d, files = generated_files(args)
     if args.report:
         from rodgains.report import report_text
@@ -148,6 +152,8 @@ def register(sub) -> None:
     g.add_argument("--json", metavar="PATH", help="write the design (A, B, Ad, Bd, C, K, L, ...) as JSON")
     g.add_argument("--check", action="store_true", help="exit 1 if the header on disk is not what the parameters generate")
     g.add_argument("--report", action="store_true", help="print poles, margins, critical lengths, the paper's K sampled")
+    g.add_argument("--force", action="store_true",
+                   help="overwrite an existing --json, or a --header PATH (or the .toml beside it) rodctl did not generate")
     g.set_defaults(func=run_gains)
 
     pp = sub.add_parser("params", help="print or write a complete parameter file (defaults plus --set)")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 
@@ -15,7 +16,8 @@ def run_log_convert(args) -> int:
     from rodctl.cli.outputs import check_output
 
     check_output(out, "--out", make_parent=True)  # before reading the log: the folder can be written
-    convert_log(src, out, fmt=fmt, overwrite=args.force)
+    convert_log(src, out, fmt=fmt, overwrite=args.force,
+                warn=lambda line: print(f"warning: {line}", file=sys.stderr))
     print(f"wrote {out}")
     return 0
 

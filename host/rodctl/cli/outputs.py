@@ -109,6 +109,28 @@ def check_output(path: str | Path, what: str, *, force: bool | None = None, figu
     check_folder_writable(parent, f"{what} {path}")
 
 
+GENERATED_MARK = "DO NOT EDIT"
+
+
+def check_regenerable(path: str | Path, what: str, *, force: bool, inputs=()) -> None:
+    """InputError unless `path` may be written as a generated file: it is none of `inputs` (a command never
+    writes over what it reads), and if it exists it is a file rodctl generated (GENERATED_MARK in its first
+    lines, so a regenerate command runs again as it is) or `force` is set."""
+    p = Path(path)
+    for src in inputs:
+        if src is not None and p.exists() and p.resolve() == Path(src).resolve():
+            raise InputError(f"{what}: would write {path}, which is an input of this command; choose another name")
+    if force or not (p.exists() or p.is_symlink()):
+        return
+    try:
+        with open(p, "rb") as f:
+            head = f.read(512)
+    except OSError:
+        head = b""
+    if GENERATED_MARK.encode() not in head:
+        raise InputError(f"{what} {path} exists and is not a file rodctl generated; pass --force to overwrite")
+
+
 def check_output_folder(folder: str | Path, what: str) -> None:
     """InputError (said as make_folder says it) unless `folder` is a writable folder, or can be made: the
     nearest existing folder above it is writable. Nothing is made here."""

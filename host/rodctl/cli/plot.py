@@ -9,7 +9,7 @@ import os
 import sys
 from pathlib import Path
 
-from rodgains.errors import InputError, UserError
+from rodgains.errors import InputError
 
 from rodctl.logs.plots import PANELS, PLOT_COLUMNS, make_figure, save_figure
 
@@ -39,18 +39,20 @@ def default_figure(log: str) -> str:
 
 def run_plot(args) -> int:
     if args.live:
+        if args.log:
+            raise InputError(f"--live opens the scope of a board, not a log: drop {args.log} or --live")
         from rodctl.cli.scope import run_scope
 
         return run_scope(args)
     if not args.log:
-        raise UserError("name a log to plot (rodctl plot run.csv), or --live --port PORT")
+        raise InputError("name a log to plot (rodctl plot run.csv), or --live --port PORT")
     from rodctl.cli.outputs import check_output
     from rodctl.logs.reader import read_log
 
     if not 1 <= args.snapshots <= 100:
         raise InputError(f"--snapshots {args.snapshots}: must be in 1 .. 100")
     if args.out is not None:  # a single named result: its folder must exist, so a typo is caught
-        check_output(args.out, "--out", figure=True)
+        check_output(args.out, "--out", figure=True, force=args.force)
     elif display_problem() is not None:  # LOG.png beside the log: checked before reading it
         check_output(default_figure(args.log), "figure (no --out, no display)", figure=True)
     from rodctl.logs.reader import cut_short
@@ -82,8 +84,9 @@ def register(sub) -> None:
                        description="Plot a rodctl log (CSV, Parquet or MCAP): every angle estimate, torque, duty and "
                                    "mode vs time, rod shapes at events (start, catch, settle, fault, end; paper "
                                    "Fig. 5) and every edge angle from the nearest upright (Fig. 6). --out writes a "
-                                   "PNG (Agg, works headless); without --out a window opens, or LOG.png is written "
-                                   "when there is no display. --live is `rodctl scope`.")
+                                   "PNG (Agg, works headless; an existing one is kept unless --force); without --out a "
+                                   "window opens, or LOG.png is written (replaced) when there is no display. --live is "
+                                   "`rodctl scope`.")
     p.add_argument("log", nargs="?", metavar="LOG", help="a log written by rodctl log or rodctl sim")
     p.add_argument("--out", metavar="PNG", help="write the figure to this file")
     p.add_argument("--snapshots", type=int, default=6, metavar="K", help="at most K rod shapes, at events (default 6)")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from rodgains.errors import UserError
+from rodgains.errors import InputError
 
 from rodctl import paths
 
@@ -24,7 +24,7 @@ def run_protocol(args) -> int:
         paths.require_checkout("rodctl protocol (without --root)")
     root = Path(args.root) if args.root else paths.REPO
     if not (root / gen.TOML_REL).is_file():
-        raise UserError(f"no protocol definition at {root / gen.TOML_REL}")
+        raise InputError(f"--root {root}: no protocol definition at {root / gen.TOML_REL}")
     if args.check:
         stale = gen.stale_files(root)
         if stale:

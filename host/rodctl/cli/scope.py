@@ -41,7 +41,7 @@ def add_scope_args(p) -> None:
     p.add_argument("--arm", choices=("swing-up", "balance"), help="arm right after connecting")
     p.add_argument("--record", metavar="PATH", help="record from the start to PATH (r toggles recording)")
     p.add_argument("--format", choices=FORMATS, help="recording format (default: from the extension, else csv)")
-    p.add_argument("--force", action="store_true", help="replace an existing recording file")
+    p.add_argument("--force", action="store_true", help="replace an existing recording file or --screenshot (rodctl plot: --out)")
     p.add_argument("--screenshot", metavar="PNG",
                    help="when the scope ends (--duration, q, Ctrl-C), save the window as it last looked to this PNG "
                         "(its folder must exist)")
@@ -298,8 +298,8 @@ def check_scope_args(args) -> None:
     check_duration(args.duration)
     if not (math.isfinite(args.window) and 0 < args.window <= 3600):
         raise InputError(f"--window {args.window:g}: must be in (0, 3600] s")
-    if args.screenshot is not None:  # replaced when it exists: the latest look of the window
-        check_output(args.screenshot, "--screenshot", force=True, figure=True)
+    if args.screenshot is not None:
+        check_output(args.screenshot, "--screenshot", force=bool(args.force), figure=True)
     if args.record:
         from rodctl.logs.writer import check_new, log_format
 

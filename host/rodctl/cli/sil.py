@@ -17,7 +17,7 @@ def run_sil_lib(args) -> int:
     if args.output and not (Path(args.output).is_dir() or args.output.endswith(("/", "\\"))):
         from rodctl.cli.outputs import check_output
 
-        check_output(args.output, "--output", make_parent=True)  # before the build, not after it
+        check_output(args.output, "--output", make_parent=True, force=args.force)  # before the build, not after it
     args.header = None  # the regenerate line names the parameters, not a header path
     lib = build_sil(params, command=regenerate_command(args))
     if args.output:
@@ -45,4 +45,5 @@ def register(sub) -> None:
     )
     add_param_args(p)
     p.add_argument("-o", "--output", metavar="PATH", help="also copy the library to PATH (a file or a folder)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --output file")
     p.set_defaults(func=run_sil_lib)

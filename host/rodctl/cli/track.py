@@ -49,13 +49,15 @@ def run_track_command(args) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".parquet":
         raise InputError(f"--out {out}: the tracked log is Parquet (.parquet); its MCAP goes beside it")
-    check_output(out, "--out")
+    check_output(out, "--out", force=args.force)
+    check_output(out.with_suffix(".mcap"), "--out's MCAP", force=args.force)
     if args.plot:
-        check_output(args.plot, "--plot", figure=True)
-    if not Path(args.video).is_file():
-        raise InputError(f"video {args.video}: no such file")
-    if not Path(args.log).is_file():
-        raise InputError(f"--log {args.log}: no such file")
+        check_output(args.plot, "--plot", figure=True, force=args.force)
+    for path, what in ((args.video, "video"), (args.log, "--log")):
+        if Path(path).is_dir():
+            raise InputError(f"{what} {path}: is a folder, not a file")
+        if not Path(path).is_file():
+            raise InputError(f"{what} {path}: no such file")
     params = load_params(args.params, args.overrides) if (args.params or args.overrides) else None
     view = None
     if args.calibrate:
@@ -65,6 +67,8 @@ def run_track_command(args) -> int:
             cols, rows = (int(v) for v in args.board.lower().split("x"))
         except ValueError:
             raise InputError(f"--board {args.board!r}: inner corners as COLSxROWS, e.g. 9x6") from None
+        if cols < 3 or rows < 3:
+            raise InputError(f"--board {args.board!r}: at least 3x3 inner corners, e.g. 9x6")
         view = View.from_checkerboard(args.calibrate, (cols, rows), args.square)
         print(f"calibration: {args.calibrate}, reprojection {view.rms_px:.2f} px, k1 {view.dist.ravel()[0]:+.3f}")
 
@@ -155,4 +159,5 @@ def register(sub) -> None:
     p.add_argument("--set", metavar="SECTION.KEY=VALUE", action="append", default=[], dest="overrides",
                    help="override one parameter (repeatable)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --out (and the MCAP beside it) or --plot")
     p.set_defaults(func=run_track_command)

@@ -193,12 +193,17 @@ def cut_short(log: "Log") -> str | None:
     return f"{log.path}: cut short ({'; '.join(why)}); {len(data)} telemetry frames readable"
 
 
-def convert_log(src: str | Path, out: str | Path, fmt: str | None = None, overwrite: bool = False) -> Path:
-    """Write the log `src` (any format) as `out` (format from fmt or out's extension); returns out."""
+def convert_log(src: str | Path, out: str | Path, fmt: str | None = None, overwrite: bool = False,
+                warn=None) -> Path:
+    """Write the log `src` (any format) as `out` (format from fmt or out's extension); returns out.
+    warn(line) is told when `src` was cut short (cut_short): the copy holds only what was readable."""
     src, out = Path(src), Path(out)
     if src.resolve() == out.resolve():
         raise InputError(f"{out} is the log being converted; choose another --out")
     log = read_log(src)
+    short = cut_short(log)
+    if short and warn is not None:
+        warn(short)
     # the metadata as written (the reader adds columns, incomplete_rows and the trailer's values), and where
     # this copy came from; the trailer is carried over as it is below, or stays absent
     meta = {k: v for k, v in log.meta.items() if k not in ("columns", "incomplete_rows", "rows", "events",

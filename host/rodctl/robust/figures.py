@@ -65,7 +65,7 @@ def heatmap_figure(rows: list[dict], title: str):
     tasks = list(dict.fromkeys(r["task"] for r in rows))
     height = max(len([r for r in rows if r["task"] == t]) for t in tasks)
     # constrained layout: tight_layout cannot fit the rotated labels of a short matrix and warns
-    fig, axes = plt.subplots(1, len(tasks), figsize=(7.2 * len(tasks), 1.6 + 0.22 * height), squeeze=False,
+    fig, axes = plt.subplots(1, len(tasks), figsize=(7.2 * len(tasks), max(3.4, 1.6 + 0.22 * height)), squeeze=False,
                              layout="constrained")
     cmap = matplotlib.colormaps["viridis_r"]
     for ax, task in zip(axes[0], tasks):

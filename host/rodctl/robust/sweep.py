@@ -20,6 +20,7 @@ from decimal import Decimal, InvalidOperation
 from rodgains.errors import InputError, ParamError
 from rodgains.params import SCHEMA, Params, _coerce, _parse_override
 
+MAX_AXIS_POINTS = 1_000_000  # one --grid range, --yes or not
 MAX_RUNS_WITHOUT_YES = 100_000
 
 
@@ -61,6 +62,9 @@ def parse_axis(spec: str) -> Axis:
             raise InputError(f"--grid {name}={body}: inverted range (stop {stop} < start {start})")
         # Decimal steps: 0.13:0.21:0.005 has exactly 17 points, with no float drift at the end
         count = int((stop - start) / step) + 1
+        if count > MAX_AXIS_POINTS:  # refused before the values are made: 1e8 of them take minutes and gigabytes
+            raise InputError(f"--grid {name}={body}: {count:,} points on one axis (at most {MAX_AXIS_POINTS:,}); "
+                             "use a larger step")
         raw = [start + i * step for i in range(count)]
         if kind.kind is int:
             if any(v != v.to_integral_value() for v in raw):
