@@ -114,6 +114,17 @@ def test_refused_bare_paper_design_reports_radius_20(tmp_path):
     assert radius == pytest.approx(20.1, rel=0.02)
 
 
+@pytest.mark.parametrize("length, warned", [(0.145, None), (0.20, "1.23 x its clamped buckling length")])
+def test_a_rod_past_its_buckling_length_is_designed_with_a_warning(tmp_path, length, warned):
+    r = rodctl("gains", "--set", f"rod.length={length}", "--header", str(tmp_path / "h.h"))
+    assert r.returncode == 0 and (tmp_path / "h.h").exists(), r.stderr
+    warnings = [ln for ln in r.stderr.splitlines() if ln.startswith("warning: ")]
+    if warned is None:
+        assert warnings == []
+    else:
+        assert len(warnings) == 1 and warned in warnings[0] and "rodctl gains --report" in warnings[0]
+
+
 @pytest.mark.parametrize("args,needle", [
     (["--set", "rod.length=-0.1"], "rod.length: must be > 0"),
     (["--set", "rod.edges=1"], "rod.edges: must be between 2"),

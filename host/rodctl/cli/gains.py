@@ -79,6 +79,18 @@ def generated_files(args) -> tuple[object, dict[Path, str]]:
     return d, files
 
 
+def buckling_warning(p: Params) -> str | None:
+    """One line when the rod above the hub is at or past its clamped buckling length, else None."""
+    from rodgains.buckling import clamped_ratio
+
+    ratio = clamped_ratio(p)
+    if ratio < 1.0:
+        return None
+    return (f"the rod above the hub is {ratio:.2f} x its clamped buckling length: it bends over whenever the shaft "
+            "holds still, and only a shaft that moves under it can hold it (docs/scenarios.md, longest rod); "
+            "rodctl gains --report checks this design on the faithful plant")
+
+
 def _write(path: Path, text: str) -> None:
     try:
         path.write_text(text)
@@ -103,6 +115,9 @@ def run_gains(args) -> int:
         for f in (header, header.with_suffix(".toml")):
             check_regenerable(f, "--header", force=args.force, inputs=(args.params,))
     d, files = generated_files(args)
+    warning = buckling_warning(d.params)
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr)
     if args.report:
         from rodgains.report import report_text
 
