@@ -472,7 +472,7 @@ def test_fitting_logs_skips_the_runs_that_did_not_play_to_their_end(tmp_path):
     assert r.returncode == 2, r.stderr
     err = r.stderr.strip().splitlines()
     assert f"fit: skipping {stopped}: the experiment did not play to its end (stopped: swung 48 deg" in err[0]
-    assert err[1] == f"fit: skipping {cut}: the experiment did not play to its end (error)"
+    assert err[1] == f"fit: skipping {cut}: the experiment did not play to its end (interrupted: Ctrl-C or a lost link)"
     assert err[-1] == "rodctl: no experiment log played to its end (2 skipped): nothing to fit"
     assert not (tmp_path / "o.toml").exists()
 
@@ -514,3 +514,13 @@ def test_an_experiment_named_twice_is_refused_before_anything_moves(tmp_path):
     assert r.returncode == 2
     assert r.stderr.strip() == "rodctl: --experiment release: given twice; each experiment runs once"
     assert not tmp_path.joinpath("logs").exists() and not list(tmp_path.iterdir())
+
+
+def test_held_out_data_that_holds_still_is_said_so_not_nan():
+    from rodctl.ident.fit import percent_fit, validation_text
+
+    still = np.full(200, 0.3)
+    assert math.isnan(percent_fit(still, still + 0.01))
+    assert validation_text(percent_fit(still, still)) == "none: the held-out data does not move"
+    moving = np.sin(np.linspace(0, 6, 200))
+    assert validation_text(percent_fit(moving, 0.99 * moving)) == "99.0 % fit"

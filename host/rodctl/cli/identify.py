@@ -318,7 +318,7 @@ def fit_logs(args, logs: list[Path], params=None, source: str = "") -> int:
     res = F.fit(records, params, starts=args.starts, progress=F.progress_printer(), model=model)
     print(f"identified in {res.seconds:.1f} s ({res.evaluations} simulations); "
           f"theta_1 residual {res.rms_counts:.2f} counts RMS; validation (held-out {100 * F.VALIDATION_FRACTION:g} %): "
-          f"{res.validation_fit_pct:.1f} % fit")
+          f"{F.validation_text(res.validation_fit_pct)}")
     print("\n".join(F.report_lines(res)))
     print("identifiability:")
     print("\n".join("  " + s for s in F.identifiability_text(res)))
@@ -343,7 +343,9 @@ def _ended_early(meta: dict) -> str | None:
     ..." past the soft limit, "error" for a Ctrl-C or a lost link, "fault", "timeout"); None for a
     complete run, or a log without that record (another tool's, or one a kill cut off)."""
     end = meta.get("end")
-    return None if end in (None, "", "done") else str(end)
+    if end in (None, "", "done"):
+        return None
+    return "interrupted: Ctrl-C or a lost link" if end == "error" else str(end)
 
 
 def incomplete_run(path: Path) -> str | None:

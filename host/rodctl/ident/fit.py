@@ -267,10 +267,18 @@ def _scales(nominal: dict[str, float]) -> dict[str, float]:
     return {fp.name: (nominal[fp.name] if nominal[fp.name] > 0 else fp.typical) for fp in FIT_PARAMS}
 
 
+def validation_text(pct: float) -> str:
+    """The held-out data's percent fit in words: NaN when that data holds still (a record that ended at rest),
+    where a percent fit means nothing."""
+    return f"{pct:.1f} % fit" if math.isfinite(pct) else "none: the held-out data does not move"
+
+
 def percent_fit(meas: np.ndarray, sim: np.ndarray) -> float:
     """100 (1 - |y - y_sim| / |y - mean y|): 100 is perfect, 0 is no better than the mean."""
+    if not len(meas) or np.ptp(meas) == 0:  # still: the mean's rounding would make any fit -1e17 %
+        return float("nan")
     den = np.linalg.norm(meas - meas.mean())
-    return float(100.0 * (1.0 - np.linalg.norm(meas - sim) / den)) if den > 0 else float("nan")
+    return float(100.0 * (1.0 - np.linalg.norm(meas - sim) / den))
 
 
 def fit(records: list[Record], params, *, fitted: tuple[str, ...] = NAMES, starts: int = 3,
@@ -413,7 +421,7 @@ def fit(records: list[Record], params, *, fitted: tuple[str, ...] = NAMES, start
     return FitResult(
         nominal=nominal, values=values, ci95=ci, fitted=tuple(fp.name for fp in fps), identifiable=identifiable,
         why=why, out_of_range=out_of_range, correlation=corr, singular_values=sv,
-        validation_fit_pct=percent_fit(val_m, val_s) if len(val_m) else float("nan"),
+        validation_fit_pct=percent_fit(val_m, val_s),
         fit_pct=percent_fit(fit_m, fit_s), rms_counts=float(np.sqrt(2 * best.cost / m) * q * cpr / (2 * math.pi)),
         starts=tried, seconds=time.monotonic() - t0, evaluations=evals[0], theta_meas=meas, theta_sim=th,
         split=split, record_names=[r.name for r in records], period=records[0].period, counts_per_rev=cpr,

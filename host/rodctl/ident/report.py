@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rodctl.ident.fit import FIT_PARAMS, FitResult, with_values
+from rodctl.ident.fit import FIT_PARAMS, FitResult, validation_text, with_values
 
 
 def written_values(res: FitResult) -> tuple[dict[str, float], dict[str, str]]:
@@ -91,7 +91,7 @@ def parameter_file(params, res: FitResult, log_digests: list[tuple[str, str]], c
                 line += f"\n# ^ {compensation.weight_comment(params['lqr']['q_shaft_angle'])}"
         lines.append(line)
     head = ["# Identified by `rodctl identify` (output-error fit against the project's C plant).",
-            f"# Validation on held-out data: {res.validation_fit_pct:.1f} % fit of theta_1; "
+            f"# Validation on held-out data (theta_1): {validation_text(res.validation_fit_pct)}; "
             f"residual {res.rms_counts:.2f} encoder counts RMS.",
             "# Logs (SHA-256):"]
     head += [f"#   {digest}  {name}" for name, digest in log_digests]
@@ -123,7 +123,7 @@ def figure(res: FitResult, path: str | Path) -> Path:
             a.set_ylabel("theta_1 [deg]")
             b.set_ylabel("residual [counts]")
             a.legend(fontsize=7, loc="upper right")
-    fig.suptitle(f"rodctl identify: validation {res.validation_fit_pct:.1f} % fit on held-out data")
+    fig.suptitle(f"rodctl identify: validation on held-out data: {validation_text(res.validation_fit_pct)}")
     fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=110)
