@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import pty
+import re
 import signal
 import time
 
@@ -54,7 +55,7 @@ FAULTS = {
     "encoder=dead": ("encoder", "still at rest, hanging 0 counts from zero; the count did not change while the "
                                 "rod turned", "Fix: the encoder is not connected: check the encoder's 5 V and GND, "
                                               "and A and B to pins 3 and 4 (docs/wiring.md)"),
-    "counts_per_rev=1958.4": ("encoder", "still at rest, hanging 0 counts from zero; the turn read +4",
+    "counts_per_rev=1958.4": ("encoder", "still at rest, hanging 0 counts from zero; the turn read +",
                               "Fix: the counts per output turn are not 979.2: check encoder.counts_per_motor_rev "
                               "and motor.gear_ratio in gains/rodgains/default.toml (a gearmotor of another ratio?); "
                               "for another encoder on this gearbox, `rodctl set counts_per_rev=N --save` keeps the "
@@ -82,6 +83,10 @@ def test_each_fault_fails_its_step_with_the_fix(fault):
     line = lines[step]
     assert line.startswith(f"FAIL {step:<9} {measured}"), line
     assert line.endswith(fix), line
+    if fault.startswith("counts_per_rev="):
+        # the hand's quarter turn reads twice the counts the file expects (the hand itself within 8 deg, as above)
+        counts, ratio = re.search(r"the turn read \+(\d+) counts \(.*\), ([\d.]+) x a quarter turn", line).groups()
+        assert abs(int(counts) / (1958.4 / 4) - 1) < 8 / 90 and 1.8 <= float(ratio) <= 2.2, line
     assert "Traceback" not in r.stderr
     # the steps before the faulty one pass; the board is never armed for balance or swing-up
     for before in STEPS[:STEPS.index(step)]:
