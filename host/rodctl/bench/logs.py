@@ -92,7 +92,7 @@ def plot_process(path: Path, runs: int = 3) -> tuple[float, float]:
     env = dict(os.environ, MPLBACKEND="Agg")
     for _ in range(runs):
         t0 = time.perf_counter()
-        proc = subprocess.Popen([sys.executable, "-m", "rodctl.cli", "plot", str(path), "--out", str(out)],
+        proc = subprocess.Popen([sys.executable, "-m", "rodctl.cli", "plot", str(path), "--out", str(out), "--force"],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
         _, status, usage = os.wait4(proc.pid, 0)
         wall = time.perf_counter() - t0

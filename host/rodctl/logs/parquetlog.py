@@ -15,6 +15,7 @@ from pathlib import Path
 from rodgains.errors import InputError
 
 from rodctl.logs import schema
+from rodctl.logs.csvlog import threaded_read
 from rodctl.logs.schema import TRAILER_KEY
 
 PARTIAL_SUFFIX = ".partial"
@@ -111,7 +112,7 @@ def read(path: Path, names: list[str] | None):
     meta["columns"] = {f.name: {k.decode(): v.decode() for k, v in (f.metadata or {}).items()}
                        for f in pf.schema_arrow}
     try:
-        table = pf.read(columns=names)
+        table = pf.read(columns=names, use_threads=threaded_read(path))  # csvlog.py says why not always
     except (pa.ArrowInvalid, OSError) as e:
         raise InputError(f"{path}: damaged Parquet data ({str(e).strip().splitlines()[0]})") from None
     meta["incomplete_rows"] = "0"
