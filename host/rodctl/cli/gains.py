@@ -12,7 +12,8 @@ from rodgains.errors import InputError
 from rodgains.params import DEFAULT_PARAMS, Params, load_params
 
 from rodctl import paths
-from rodctl.cli.outputs import check_name, check_output, check_output_folder, check_regenerable, make_folder
+from rodctl.cli.outputs import (check_name, check_not_input, check_output, check_output_folder, check_regenerable,
+                                make_folder)
 
 
 def add_param_args(p: argparse.ArgumentParser) -> None:
@@ -103,7 +104,7 @@ def run_gains(args) -> int:
     # which would write the committed header in the checkout
     if args.json is not None:
         check_output(args.json, "--json", force=args.force)
-        check_regenerable(args.json, "--json", force=True, inputs=(args.params,))
+        check_not_input(args.json, "--json", (args.params,))
     if args.header is not None:
         check_name(args.header, "--header")
     elif not (args.report or args.json or args.check):

@@ -239,7 +239,7 @@ def _run_and_fit(args, exps, log_dir: Path, stamp: str) -> int:
         board, board_source = design_params(session, args)
         explicit = bool(args.params or args.overrides)
         params, source = (board, board_source) if board is not None and not explicit else _nominal(args)
-        limits = board or params
+        limits = board if board is not None else params
         h = session.hello
         # the board reduces counts with its own counts per turn (a rig setting); the fit reads them the same way
         board_counts = hello_counts_per_rev(h)
@@ -340,8 +340,8 @@ def fit_logs(args, logs: list[Path], params=None, source: str = "") -> int:
 
 def _ended_early(meta: dict) -> str | None:
     """How an experiment log of `rodctl identify` ended when it did not play to its end ("stopped: swung
-    ..." past the soft limit, "error" for a Ctrl-C or a lost link, "fault", "timeout"); None for a
-    complete run, or a log without that record (another tool's, or one a kill cut off)."""
+    ..." past the soft limit, "interrupted: ..." where the log says "error" (a Ctrl-C or a lost link), "fault",
+    "timeout"); None for a complete run, or a log without that record (another tool's, or one a kill cut off)."""
     end = meta.get("end")
     if end in (None, "", "done"):
         return None

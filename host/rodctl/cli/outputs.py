@@ -112,14 +112,21 @@ def check_output(path: str | Path, what: str, *, force: bool | None = None, figu
 GENERATED_MARK = "DO NOT EDIT"
 
 
-def check_regenerable(path: str | Path, what: str, *, force: bool, inputs=()) -> None:
-    """InputError unless `path` may be written as a generated file: it is none of `inputs` (a command never
-    writes over what it reads), and if it exists it is a file rodctl generated (GENERATED_MARK in its first
-    lines, so a regenerate command runs again as it is) or `force` is set."""
+def check_not_input(path: str | Path, what: str, inputs) -> None:
+    """InputError when `path` is one of `inputs` (None entries skipped): a command never writes over what it reads,
+    --force or not."""
     p = Path(path)
     for src in inputs:
         if src is not None and p.exists() and p.resolve() == Path(src).resolve():
             raise InputError(f"{what}: would write {path}, which is an input of this command; choose another name")
+
+
+def check_regenerable(path: str | Path, what: str, *, force: bool, inputs=()) -> None:
+    """InputError unless `path` may be written as a generated file: it is none of `inputs` (check_not_input),
+    and if it exists it is a file rodctl generated (GENERATED_MARK in its first lines, so a regenerate command
+    runs again as it is) or `force` is set."""
+    check_not_input(path, what, inputs)
+    p = Path(path)
     if force or not (p.exists() or p.is_symlink()):
         return
     try:

@@ -71,13 +71,14 @@ def files_of(path: str | Path, fmt: str | None = None) -> list[Path]:
     return [path]
 
 
-def check_new(path: str | Path, fmt: str | None = None, overwrite: bool = False) -> None:
-    """UserError when the log would replace an existing file and overwrite is not set (before any work)."""
+def check_new(path: str | Path, fmt: str | None = None, overwrite: bool = False, also=()) -> None:
+    """UserError when the log would replace an existing file and overwrite is not set (before any work);
+    `also`: files the caller writes beside the log (the simulator's truth file)."""
     path = Path(path)
     if path.is_dir():
         raise InputError(f"{path} is a directory; name a log file")
     if not overwrite:
-        for f in files_of(path, fmt):
+        for f in [*files_of(path, fmt), *map(Path, also)]:
             if f.exists():
                 raise InputError(f"{f} exists: choose another file name, or --force to replace it")
 
