@@ -57,6 +57,9 @@ def test_missing_params_file_of_a_sim_url_is_named():
     ("sim://?bogus=1", "unknown sim:// option 'bogus'"),
     ("sim://x", "sim:// takes options only after '?'"),
     ("sim://?edges=abc", "edges must be an integer, got 'abc'"),
+    # edges is the plant's (as `rodctl sim --edges`), judged by the [plant] table's own range; 0 is not "unset"
+    ("sim://?edges=0", "plant.edges: must be between 2 and 200 [-], got 0"),
+    ("sim://?edges=201", "plant.edges: must be between 2 and 200 [-], got 201"),
     ("sim://?plant=foo", "unknown plant 'foo'"),
     ("sim://?plant=missing.toml", "missing.toml: cannot read parameter file"),
     ("sim://?set=rod.nope=1", "--set rod.nope: unknown key"),

@@ -185,3 +185,26 @@ def test_no_page_links_outside_the_site():
                 continue
             assert (page.parent / target).resolve().is_relative_to(DOCS.resolve()), f"{page}: {target}"
             assert (page.parent / target).exists(), f"{page}: {target}"
+
+
+def test_a_key_left_out_of_a_file_takes_the_value_the_reference_names(tmp_path):
+    """Each optional key deleted from a copy of default.toml loads to the reference's default, or to the
+    value its "if left out" names (a file written before the key keeps what it was tuned with)."""
+    from rodgains.params import DEFAULT_PARAMS, SCHEMA, load_params
+
+    params = (DOCS / "reference" / "params.md").read_text()
+    lines = DEFAULT_PARAMS.read_text().splitlines()
+    optional = [(s, k) for s, keys in SCHEMA.items() for k, spec in keys.items() if spec.default is not None]
+    assert len(optional) > 20
+    for section, key in optional:
+        row = re.search(rf"^\| `{key}` \(optional(?:, (\S+) if left out)?\) \| (\S+) \|",
+                        params.split(f"## [{section}]")[1], re.M)
+        assert row, f"{section}.{key}"
+        start = lines.index(next(x for x in lines if x.startswith(f"[{section}]")))
+        at = next(i for i in range(start + 1, len(lines)) if re.match(rf"{key}\s*=", lines[i]))
+        f = tmp_path / f"{section}.{key}.toml"
+        f.write_text("\n".join(lines[:at] + lines[at + 1:]) + "\n")
+        got = load_params(f)[section][key]
+        want = row.group(1) or row.group(2)
+        assert f"{got}".strip('"').lower() == want.strip('"').lower() or float(got) == float(want), \
+            (f"{section}.{key}", got, want)

@@ -173,7 +173,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "lqr": {
         "q_angle": Key(float, "1/rad^2", _nonneg),
         "q_rate": Key(float, "s^2/rad^2", _nonneg),
-        # added to q_angle on the shaft's own angle theta_1: a stiffer base (docs/design.md, "A stiffer shaft")
+        # added to q_angle on the shaft's own angle theta_1: a stiffer base (docs/design.md, "A stiffer shaft").
+        # Left out, 0 (not default.toml's 325): a file written before it keeps the weights it was tuned with
         "q_shaft_angle": Key(float, "1/rad^2", _nonneg, default=0.0),
         "r_torque": Key(float, "1/(N m)^2", _positive),
         "r_torque_rate": Key(float, "s^2/(N m)^2", _nonneg, default=0.0),
@@ -199,7 +200,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
     # the balance set-point trim (firmware/src/core/rod_trim.h): upright found from the holding torque
     "trim": {
         "time_constant": Key(float, "s", _between(0.0, 100.0), default=2.0),
-        "band": Key(float, "N m", _between(0.0, 0.05), default=0.001),
+        "band": Key(float, "N m", _between(0.0, 0.05), default=0.0005),
         "flank_hold": Key(float, "N m", _between(0.0, 0.05), default=0.003),
         "band_max": Key(float, "N m", _between(0.0, 0.05), default=0.0015),
         "hold_time_constant": Key(float, "s", _between(0.001, 10.0), default=0.2),

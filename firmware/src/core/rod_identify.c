@@ -84,6 +84,19 @@ static float prbs_bit(rod_identify_t *id)
     return lsb != 0u ? id->req.amplitude : -id->req.amplitude;
 }
 
+/* sin of the phase at period k, then the phase moved on to period k + 1. */
+static float next_sine(rod_identify_t *id, uint32_t k)
+{
+    float s = sinf(id->phase);
+    /* Wrapped every period: the phase grows to thousands of rad over a long chirp, where
+     * float would lose the fine increments. */
+    id->phase += id->dphase0 + ((float)k + 0.5f) * id->ddphase; /* midpoint: phi(k dt) exact */
+    while (id->phase >= ROD_PI_F) {
+        id->phase -= 2.0f * ROD_PI_F;
+    }
+    return s;
+}
+
 float rod_identify_torque(rod_identify_t *id, bool *done)
 {
     if (id->k >= id->total) {
@@ -95,19 +108,9 @@ float rod_identify_torque(rod_identify_t *id, bool *done)
     float a = id->req.amplitude;
     switch (id->req.excitation) {
     case ROD_EXCITATION_CHIRP:
-    case ROD_EXCITATION_SETTLE: {
-        float u = a * sinf(id->phase);
-        if (id->req.excitation == ROD_EXCITATION_SETTLE) {
-            u *= 1.0f - (float)k / (float)id->total; /* ddphase is 0: a fixed frequency */
-        }
-        /* Wrapped every period: the phase grows to thousands of rad over a long chirp, where
-         * float would lose the fine increments. */
-        id->phase += id->dphase0 + ((float)k + 0.5f) * id->ddphase; /* midpoint: phi(k dt) exact */
-        while (id->phase >= ROD_PI_F) {
-            id->phase -= 2.0f * ROD_PI_F;
-        }
-        return u;
-    }
+        return a * next_sine(id, k);
+    case ROD_EXCITATION_SETTLE: /* one frequency (ddphase 0), its amplitude fading to 0 at the end */
+        return a * next_sine(id, k) * (1.0f - (float)k / (float)id->total);
     case ROD_EXCITATION_PRBS:
         if (k % id->hold == 0u) {
             id->level = prbs_bit(id);

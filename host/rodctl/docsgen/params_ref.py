@@ -45,7 +45,7 @@ def page() -> str:
             "- **plausible**: the range a testbed's value falls in; a value outside it is refused with the unit "
             "it was probably typed in (\"155 m: did you mean 0.155 m?\").",
             "- **optional**: the key may be left out of a file (files written before it existed); its default "
-            "then applies. Every other key is required.",
+            "then applies, or the value named \"if left out\" where that differs. Every other key is required.",
             "- Source tags in the notes: \\[T1\\] Table I of the paper, \\[P\\] its text, \\[PN\\] the "
             "[physics notes](../physics-notes.md), \\[V\\] vendor data, \\[E\\] an estimate to measure, \\[S\\] chosen in "
             "simulation, \\[T\\] chosen by `rodctl tune`.", ""]
@@ -55,7 +55,10 @@ def page() -> str:
             name = f"{section}.{key}"
             plaus = PLAUSIBLE.get(name)
             plaus_text = f"{plaus[0]:g} to {plaus[1]:g}" if plaus else ""
-            optional = " (optional)" if spec.default is not None else ""
+            optional = ""
+            if spec.default is not None:
+                left_out = "" if spec.default == defaults[section][key] else f", {_value(spec.default)} if left out"
+                optional = f" (optional{left_out})"
             note = notes.get(name, "").replace("|", "\\|").replace("[", "\\[")  # [T1]: a tag, not a link
             body.append(f"| `{key}`{optional} | {_value(defaults[section][key])} | {spec.unit} | {allowed_text(spec)} | "
                         f"{plaus_text} | {note} |")

@@ -114,7 +114,8 @@ class VirtualDevice:
         # The same parameters build the firmware and the plant: `--params/--set` describe this rod.
         self.params = params if params is not None else load_params(params_path, list(overrides))
         # plant= and edges= are shorthands for the [plant] table, as `rodctl sim --plant/--edges` are.
-        shorthand = ([f"plant.model={plant}"] if plant else []) + ([f"plant.edges={edges}"] if edges else [])
+        shorthand = (([f"plant.model={plant}"] if plant else [])
+                     + ([f"plant.edges={edges}"] if edges is not None else []))
         self.params_path = params_path
         self.overrides = list(overrides)
         self.theta0_deg = float(theta0_deg)
@@ -192,8 +193,6 @@ class VirtualDevice:
                 edges = int(edges)
             except ValueError:
                 raise InputError(f"edges must be an integer, got {edges!r}") from None
-            if not 2 <= edges <= 64:
-                raise InputError(f"edges must be 2..64, got {edges}")
         plant_params = None
         if plant is not None and plant.endswith(".toml"):
             from rodgains.params import load_params
