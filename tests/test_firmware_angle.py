@@ -101,6 +101,8 @@ def core():
     lib.rod_rig_decode.argtypes = [C.c_char_p, C.c_size_t, Rig, C.POINTER(Rig)]
     lib.rod_rig_encode.restype = None
     lib.rod_rig_encode.argtypes = [C.POINTER(Rig), C.c_char_p]
+    lib.rod_counts_make.restype = C.c_bool
+    lib.rod_counts_make.argtypes = [C.c_int32, C.c_int32, C.POINTER(Counts)]
     return lib
 
 
@@ -114,7 +116,7 @@ def test_a_counts_value_becomes_its_exact_fraction(value, fraction):
     assert (c.num, c.den) == fraction
 
 
-@pytest.mark.parametrize("value", [1.0, 1e6 + 1.0, math.nan, math.inf, -979.2])
+@pytest.mark.parametrize("value", [1.0, 15.0, 1e6 + 1.0, math.nan, math.inf, -979.2])
 def test_a_counts_value_out_of_range_is_refused(value):
     assert not core().rod_counts_from_value(value, C.byref(Counts()))
 
@@ -155,9 +157,35 @@ def test_the_stored_rig_keeps_the_counts_and_reads_the_older_layout():
     bad = bytearray(buf.raw)
     bad[10:12] = b"\0\0"
     bad[14:16] = P.crc16(bytes(bad[:14])).to_bytes(2, "little")
+    # ... and so is one with fewer counts per turn than SET accepts (2 / 1000: angles would overflow)
+    few = Rig(1, 1, Counts(2, 1000, 0.0, 0.0))
+    raw = bytearray(buf.raw)
+    raw[6:10], raw[10:12] = (2).to_bytes(4, "little"), (1000).to_bytes(2, "little")
+    raw[14:16] = P.crc16(bytes(raw[:14])).to_bytes(2, "little")
+    assert lib.rod_rig_decode(bytes(raw), 16, defaults, C.byref(few)) == 0x08
+    assert not lib.rod_counts_make(15, 1, C.byref(Counts())) and lib.rod_counts_make(16, 1, C.byref(Counts()))
     for data, n in ((bytes(bad), 16), (buf.raw, 8)):
         assert lib.rod_rig_decode(data, n, defaults, C.byref(out)) == 0x08  # STORE_CORRUPT
         assert (out.encoder_sign, out.counts.num) == (1, 4896)
+
+
+def test_save_rig_stores_the_settings_as_they_were_when_it_arrived():
+    """A SET handled after SAVE_RIG, before the main loop writes the EEPROM, is not stored: the record is
+    the settings the host asked to keep (the virtual board's main loop takes it after each step)."""
+    from rodctl.sim.device import VirtualDevice
+
+    dev = VirtualDevice.from_options()
+    try:
+        dev.step()
+        dev.write(P.encode(P.SaveRig(), 1) + P.encode(P.Set(P.Param.ENCODER_SIGN, -1.0), 2)
+                  + P.encode(P.Set(P.Param.COUNTS_PER_REV, 1958.4), 3))
+        dev.step()
+        assert len(dev.eeprom) == 16
+        out = Rig()
+        assert core().rod_rig_decode(dev.eeprom, 16, Rig(1, 1, Counts(4896, 5, 0.0, 0.0)), C.byref(out)) == 0x04
+        assert (out.encoder_sign, out.counts.num, out.counts.den) == (1, 4896, 5)
+    finally:
+        dev.close()
 
 
 def test_a_counts_value_with_no_small_fraction_gets_the_closest_that_fits():

@@ -13,7 +13,7 @@
 bool rod_counts_make(int32_t num, int32_t den, rod_counts_t *out)
 {
     if (num < ROD_COUNTS_NUM_MIN || num > ROD_COUNTS_NUM_MAX || den < 1 || den > ROD_COUNTS_DEN_MAX
-        || num > ROD_COUNTS_PRODUCT_MAX / den) {
+        || num > ROD_COUNTS_PRODUCT_MAX / den || num < ROD_COUNTS_PER_TURN_MIN * den) {
         return false;
     }
     out->num = num;

@@ -24,6 +24,9 @@ extern "C" {
 #define ROD_COUNTS_NUM_MAX 1000000
 #define ROD_COUNTS_DEN_MAX 1000
 #define ROD_COUNTS_PRODUCT_MAX 10000000
+/* The fewest counts per turn SET accepts (rodlink.toml COUNTS_PER_REV min): a stored record may not load
+ * what SET refuses, and from 16 counts per turn (count / num) den stays below |count|. */
+#define ROD_COUNTS_PER_TURN_MIN 16
 
 /* Encoder counts per output turn, num / den exactly; one turn is 2 num ticks. */
 typedef struct {

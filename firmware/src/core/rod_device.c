@@ -29,8 +29,14 @@ bool rod_device_take_save(rod_device_t *dev, uint8_t out[ROD_RIG_STORE_SIZE])
     if (!dev->save_wanted) {
         return false;
     }
-    dev->save_wanted = false;
-    rod_rig_encode(&dev->control.settings.rig, out);
+    do { /* a SAVE_RIG during the copy rewrites the bytes and raises the flag again: copy again */
+        dev->save_wanted = false;
+        __atomic_signal_fence(__ATOMIC_SEQ_CST);
+        for (size_t i = 0; i < ROD_RIG_STORE_SIZE; i++) {
+            out[i] = dev->save_bytes[i];
+        }
+        __atomic_signal_fence(__ATOMIC_SEQ_CST);
+    } while (dev->save_wanted);
     dev->rig_source = ROD_RIG_FLAG_STORED;
     return true;
 }
@@ -72,6 +78,10 @@ static uint8_t apply_command(rod_device_t *dev, const rod_msg_command_t *cmd)
         dev->hello_wanted = true;
         return ROD_ACK_OK;
     case ROD_MSG_SAVE_RIG:
+        /* The settings as they are now: a SET after this one must not reach the stored record,
+         * and the main loop must not encode a num / den pair this interrupt is changing. */
+        rod_rig_encode(&c->settings.rig, dev->save_bytes);
+        __atomic_signal_fence(__ATOMIC_SEQ_CST);
         dev->save_wanted = true;
         return ROD_ACK_OK;
     case ROD_MSG_IDENTIFY: {

@@ -39,7 +39,8 @@ typedef struct {
     bool hello_wanted;
     uint8_t board_fault; /* ROD_REASON_* the board reported (rod_device_board_fault), NONE normally */
     uint8_t rig_source;  /* ROD_RIG_FLAG_STORED / _STORE_CORRUPT: where the signs came from */
-    volatile bool save_wanted; /* SAVE_RIG arrived; the main loop stores the signs */
+    volatile bool save_wanted; /* SAVE_RIG arrived; the main loop stores save_bytes */
+    uint8_t save_bytes[ROD_RIG_STORE_SIZE]; /* the rig settings as SAVE_RIG found them (rod_rig_encode) */
 } rod_device_t;
 
 /* Power-on state: DISARMED, driver off, default settings. */

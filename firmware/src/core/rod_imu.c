@@ -21,7 +21,11 @@ bool rod_imu_step(rod_imu_t *m, const rod_imu_reading_t *r, int32_t count)
     if (r->fresh) {
         m->last = *r;
     }
-    m->bad_run = good ? 0u : m->bad_run + 1u;
+    if (good) {
+        m->bad_run = 0u;
+    } else if (m->bad_run < UINT32_MAX) { /* held, not wrapped: a part gone for 50 days is still lost */
+        m->bad_run++;
+    }
 
     if (count != m->still_count) {
         m->still_count = count;

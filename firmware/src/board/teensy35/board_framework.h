@@ -15,6 +15,7 @@
 #pragma GCC diagnostic ignored "-Wtype-limits"
 #pragma GCC diagnostic ignored "-Wimplicit-fallthrough"
 #pragma GCC diagnostic ignored "-Wcast-function-type"
+#pragma GCC diagnostic ignored "-Wdeprecated-copy"  // DMAChannel.h (cores 1.58 to 1.59)
 #include <Arduino.h>
 #include <IntervalTimer.h>
 #include <SPI.h>

@@ -67,8 +67,8 @@ static void transfer_done(EventResponderRef)
 {
     digitalWriteFast(BOARD_PIN_IMU_CS, HIGH);
     SPI.endTransaction();
+    done = true;  // before busy: a control step in between takes this sample, not a transfer over it
     busy = false;
-    done = true;
 }
 
 static int16_t be16(const uint8_t *p)
@@ -111,6 +111,7 @@ void board_imu_take(rod_imu_reading_t *out)
         return;
     }
     done = false;
+    __atomic_signal_fence(__ATOMIC_SEQ_CST);  // rx (DMA-written, not volatile) is read after done, not before
     // the part's axes to the rod's frame (board_pins.h): x along the rod to the tip, y toward +theta
     const float a[3] = {be16(rx + 1) * ACCEL_M_S2_PER_LSB, be16(rx + 3) * ACCEL_M_S2_PER_LSB, be16(rx + 5) * ACCEL_M_S2_PER_LSB};
     const float g[3] = {be16(rx + 7) * GYRO_RAD_S_PER_LSB, be16(rx + 9) * GYRO_RAD_S_PER_LSB, be16(rx + 11) * GYRO_RAD_S_PER_LSB};

@@ -10,7 +10,7 @@
 #include "board_quadrature.h"
 
 static uint16_t last_hw;
-static int32_t extended;
+static uint32_t extended;  // unsigned: wraps after 2^32 counts like the core's own count arithmetic (rod_angle.c)
 
 void board_quadrature_begin()
 {
@@ -37,7 +37,7 @@ int32_t board_quadrature_count()
 {
     uint16_t hw = (uint16_t)FTM1_CNT;
     // The signed 16-bit difference is the motion since the last call, across counter wrap.
-    extended += (int16_t)(uint16_t)(hw - last_hw);
+    extended += (uint32_t)(int32_t)(int16_t)(uint16_t)(hw - last_hw);
     last_hw = hw;
-    return extended;  // the core applies the rig's encoder sign (rod_rig.h)
+    return (int32_t)extended;  // the core applies the rig's encoder sign (rod_rig.h)
 }
