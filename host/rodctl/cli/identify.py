@@ -514,8 +514,8 @@ def register(sub) -> None:
                         "one polished on the file's plant")
     p.add_argument("--compensation-cases", default="matrix", metavar="SET",
                    help="after the fit, choose lqr.friction_compensation for the identified rig by this case set "
-                        "of the robustness matrix (matrix, quick, nominal, plants; 2 to 3 min for matrix on 2 cores, about "
-                        "2 min more when none passes every run and the stiffer lqr.q_shaft_angle 400 is tried "
+                        "of the robustness matrix (matrix, quick, nominal, plants; about 4 min for matrix on 2 cores, as "
+                        "long again when none passes every run and the stiffer lqr.q_shaft_angle 400 is tried "
                         "too), or none to keep the nominal file's (default matrix); the closing verdict runs the same set on the "
                         "identified rig with its gearbox (with none: the nominal runs only)")
     p.add_argument("--jobs", type=int, metavar="N", help="worker processes for that choice (default: every core)")
