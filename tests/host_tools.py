@@ -26,6 +26,15 @@ def rodctl_env(**extra) -> dict:
     return env
 
 
+def until(condition, timeout: float = 30.0) -> bool:
+    """Poll `condition` until it holds or `timeout` [s] passes; its last value. A loaded machine runs the
+    virtual board and the windows late, never differently: wait for what is checked, not a fixed time."""
+    t0 = time.monotonic()
+    while not condition() and time.monotonic() - t0 < timeout:
+        time.sleep(0.02)
+    return bool(condition())
+
+
 def run_rodctl(*args, timeout: float = 120, env: dict | None = None, input: str | None = None, cwd=None):
     """Run `rodctl ARGS` in a subprocess (in folder cwd); returns CompletedProcess (text)."""
     return subprocess.run([*RODCTL, *args], capture_output=True, text=True, timeout=timeout,

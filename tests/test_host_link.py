@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from host_tools import run_rodctl
+from host_tools import run_rodctl, until
 from rodgains.errors import UserError
 from rodgains.params import load_params
 
@@ -178,8 +178,7 @@ def test_arm_swing_up_drives_the_motor_and_disarm_stops_it(session):
     counts = []
     session.add_listener(lambda f, _t: counts.append(f.msg.encoder_count) if f.type == P.MsgType.TELEMETRY else None,
                          replay=False)
-    time.sleep(0.5)
-    assert max(abs(c) for c in counts) > 20  # the simulated rod swings (20 counts = 7 deg)
+    assert until(lambda: max(map(abs, counts), default=0) > 20)  # the simulated rod swings (20 counts = 7 deg)
     ack = session.disarm()
     assert ack.mode == P.Mode.DISARMED
     t = session.wait_telemetry()
@@ -228,8 +227,7 @@ def test_sim_url_options_choose_the_plant():
         counts = []
         s.add_listener(lambda f, _t: counts.append(f.msg.encoder_count) if f.type == P.MsgType.TELEMETRY else None)
         s.arm(P.ArmMode.SWING_UP)
-        time.sleep(0.3)
-        assert max(abs(c) for c in counts) > 5  # the simulated DER rod moves
+        assert until(lambda: max(map(abs, counts), default=0) > 5)  # the simulated DER rod moves
 
 
 def test_bad_sim_option_is_one_line(capsys):

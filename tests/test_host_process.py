@@ -56,18 +56,16 @@ def test_sigkill_of_log_leaves_a_readable_csv_and_a_board_that_disarms_itself(tm
         # reconnect passively (no heartbeat of ours) and watch the board trip its watchdog
         listener = Listener(pts)
         try:
-            hit = listener.wait_for(lambda f: f.type == P.MsgType.TELEMETRY and f.msg.mode == P.Mode.FAULT, 3.0)
+            hit = listener.wait_for(lambda f: f.type == P.MsgType.TELEMETRY and f.msg.mode == P.Mode.FAULT, 60.0)
         finally:
             listener.close()
         assert hit is not None, "the board stayed armed without a host"
         t_fault, frame = hit
-        delay = t_fault - t_kill
-        print(f"\nFAULT (HEARTBEAT) seen {delay:.3f} s after the SIGKILL")
+        print(f"\nFAULT (HEARTBEAT) seen {t_fault - t_kill:.3f} s after the SIGKILL")
         assert frame.msg.reason == P.Reason.HEARTBEAT
         assert not frame.msg.flags & P.TelemetryFlag.DRIVER_ENABLED
-        # It trips by itself (within the listener's 3 s); when, by the device's own clock, is pinned
-        # in test_firmware_safety.py: wall-clock delays here depend on the machine's load.
-        assert delay < 3.5
+        # It trips by itself; when, by the device's own clock, is pinned in test_firmware_safety.py
+        # (wall-clock delays here depend on the machine's load).
         # a user reconnecting sees why it stopped
         r = run_rodctl("status", "--port", pts)
         assert "mode        FAULT (heartbeat lost): run `rodctl clear-fault`" in r.stdout, (r.stdout, r.stderr)
@@ -93,14 +91,20 @@ def test_ctrl_c_of_log_leaves_a_valid_file_and_disarms(tmp_path):
         assert log.returncode == 0, err
         assert "Traceback" not in err
         assert err.strip().splitlines()[-1].endswith("; disarmed")
-        # the board: DISARMED by the host, not FAULT, and it stays so with nobody attached
-        time.sleep(0.7)
+        # the board: DISARMED by the host, not FAULT, and it stays so with nobody attached, past twice its
+        # heartbeat timeout by its own clock
+        def span_us(frames):
+            return (frames[-1].time_us - frames[0].time_us) % 2**32 if frames else 0
+
         listener = Listener(pts)
         try:
-            frames = [f for _, f in listener.frames(0.3) if f.type == P.MsgType.TELEMETRY]
+            frames, end = [], time.monotonic() + 60.0
+            while span_us(frames) < 1_000_000 and time.monotonic() < end:
+                frames += [f for _, f in listener.frames(0.05) if f.type == P.MsgType.TELEMETRY]
         finally:
             listener.close()
-        assert frames and all((f.msg.mode, f.msg.reason) == (P.Mode.DISARMED, P.Reason.HOST) for f in frames)
+        assert span_us(frames) >= 1_000_000, "the board's clock did not advance 1 s"
+        assert all((f.msg.mode, f.msg.reason) == (P.Mode.DISARMED, P.Reason.HOST) for f in frames)
 
     log = read_log(out)
     meta, data = log

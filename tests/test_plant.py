@@ -184,7 +184,12 @@ def test_library_builds_with_the_firmware_warning_set():
     from rodctl.build.native import FIRMWARE_WARNINGS, compile_shared
     from rodctl.sim.plant import NATIVE, SOURCES
 
-    compile_shared("rod_plant_strict", SOURCES, [NATIVE], ("-O2", "-Wshadow", "-pedantic", *FIRMWARE_WARNINGS))
+    import ctypes
+
+    assert "-Werror" in FIRMWARE_WARNINGS  # any warning of the set fails the build
+    lib = ctypes.CDLL(str(compile_shared("rod_plant_strict", SOURCES, [NATIVE],
+                                         ("-O2", "-Wshadow", "-pedantic", *FIRMWARE_WARNINGS))))
+    assert all(hasattr(lib, f) for f in ("rod_plant_energy", "rod_plant_advance"))  # the plant's ABI, built strict
 
 
 def test_plant_options():

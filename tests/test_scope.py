@@ -14,7 +14,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from host_tools import RODCTL, ctrl_c_as_at_a_terminal, rodctl_env
+from host_tools import RODCTL, ctrl_c_as_at_a_terminal, rodctl_env, until
 
 from rodctl.link import protocol as P
 
@@ -70,7 +70,15 @@ def test_scope_draws_a_balanced_rod_upright_in_a_real_window(xdisplay, tmp_path)
                         "--screenshot", str(shot))
     try:
         _wait_for_window(proc)
-        time.sleep(4.0)  # a few seconds of balance, drawn every 100 ms
+        # the window redraws every 100 ms: grab it until a rod is drawn (a loaded machine draws it later)
+        deadline = time.monotonic() + 60
+        while True:
+            img = np.asarray(ImageGrab.grab(xdisplay=xdisplay).convert("RGB")).astype(int)
+            rows, cols = _red_rod(img)
+            if rows.size > 200 or time.monotonic() > deadline:
+                break
+            time.sleep(0.2)
+        time.sleep(1.0)  # then a second more of balance on screen
         img = np.asarray(ImageGrab.grab(xdisplay=xdisplay).convert("RGB")).astype(int)
     finally:
         proc.send_signal(signal.SIGINT)
@@ -180,15 +188,18 @@ def test_keys_and_buttons_arm_set_record_and_disarm(tmp_path):
         assert "swing_amplitude = 0.03" in scope.message
         scope.action("set", "swing_amplitude=0.03 catch_angle_deg=1e42")
         assert scope.message.startswith("refused: ")
-        time.sleep(0.5)
-        scope.update()
-        x, y = scope.rod.get_data()
-        assert y[-1] > 0.9 * 0.031 * s.hello.n  # the drawn rod is the estimate: upright
+        def drawn_upright():
+            scope.update()
+            return scope.rod.get_data()[1][-1] > 0.9 * 0.031 * s.hello.n
+
+        assert until(drawn_upright)  # the drawn rod is the estimate: upright
         assert "theta1" in scope.status.get_text() and "from upright" in scope.status.get_text()
-        time.sleep(1.2)
-        scope.update()
-        lo, hi = scope.ax_th.get_ylim()
-        assert -30 < lo < 0 < hi < 30  # balanced: the angle panel zooms to upright
+        def zoomed():
+            scope.update()
+            lo, hi = scope.ax_th.get_ylim()
+            return -30 < lo < 0 < hi < 30
+
+        assert until(zoomed)  # balanced: the angle panel zooms to upright
         assert scope.ax_tq.get_ylabel() == "torque [mN m]" and scope.ax_du.get_ylim() == (-1.05, 1.05)
         scope._key(SimpleNamespace(key="d"))
         assert scope.message.startswith("disarmed")
@@ -218,7 +229,8 @@ def test_each_key_does_what_the_window_says_and_no_dialog_opens(xdisplay, tmp_pa
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
     said: list[str] = []
     lines: queue.Queue = queue.Queue()
-    threading.Thread(target=lambda: [lines.put(ln) for ln in proc.stderr], daemon=True).start()
+    reader = threading.Thread(target=lambda: [lines.put(ln) for ln in proc.stderr], daemon=True)
+    reader.start()
 
     def press(key: str, expect: str) -> None:
         _xdotool(xdisplay, "key", key)
@@ -258,7 +270,7 @@ def test_each_key_does_what_the_window_says_and_no_dialog_opens(xdisplay, tmp_pa
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    time.sleep(0.5)
+    reader.join(timeout=30)  # it ends at the end of the scope's stderr: every line is in the queue
     while not lines.empty():
         said.append(lines.get())
     assert proc.returncode == 0, said
