@@ -415,8 +415,11 @@ def test_a_generated_header_is_regenerated_and_force_replaces_a_users_file(tmp_p
     r = run_rodctl("gains", "--header", str(tmp_path / "other.h"), "--force", timeout=300)
     assert r.returncode == 0, r.stderr
     assert "DO NOT EDIT" in (tmp_path / "other.toml").read_text().splitlines()[0]
+    first = {n: (tmp_path / n).read_bytes() for n in ("other.h", "other.toml")}
     r = run_rodctl("gains", "--header", str(tmp_path / "other.h"), timeout=300)  # the regenerate line, as it is
     assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith(f"wrote {tmp_path / 'other.h'}, {tmp_path / 'other.toml'}  (N=")
+    assert {n: (tmp_path / n).read_bytes() for n in first} == first  # no timestamp: the same bytes again
 
 
 @pytest.mark.parametrize("argv, line", [

@@ -174,6 +174,11 @@ def test_the_tutorial_runs_as_written(name, tmp_path):
                 "first-power-on": {"my_rig.toml", "my_rig.png", "first-swingup.csv", "rod_gains.h"},
                 "logging": {"balance.parquet", "swingup.csv", "swingup.mcap", "swingup.png"}}[name]
     assert expected <= produced, sorted(expected - produced)
+    from rodctl.logs import read_log
+
+    for log in sorted(n for n in expected if n.endswith((".csv", ".parquet"))):  # each run the page makes
+        modes = set(read_log(next(tmp_path.rglob(log))).data["mode_name"])
+        assert "FAULT" not in modes and "BALANCE" in modes, (name, log, modes)  # it balanced, nothing tripped
 
 
 def test_no_page_links_outside_the_site():

@@ -16,7 +16,8 @@ from rodgains.params import load_params
 
 
 def rodctl(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "rodctl.cli", *args], capture_output=True, text=True, cwd=cwd)
+    return subprocess.run([sys.executable, "-m", "rodctl.cli", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=600)
 
 
 def one_line_error(result, code):
@@ -166,6 +167,7 @@ def test_params_command_round_trips_a_complete_file(tmp_path):
 def test_committed_header_is_current():
     r = rodctl("gains", "--check")
     assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("up to date: ") and "rod_gains.h" in r.stdout and "rod_gains.toml" in r.stdout
 
 
 def test_check_fails_on_a_stale_header(tmp_path):

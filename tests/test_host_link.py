@@ -112,6 +112,9 @@ def test_the_device_refuses_what_the_host_refuses(session):
             session.command(P.Set(setting.param, setting.to_device(value)), what="raw set")
     for setting, value in [(SETTINGS["catch_angle_deg"], 2.0), (SETTINGS["swing_angle_deg"], 2.0)]:
         session.command(P.Set(setting.param, setting.to_device(value)), what="raw set")  # the bounds themselves
+    hello = session.request_hello()
+    assert hello.catch_angle == pytest.approx(math.radians(2.0), rel=1e-6)  # taken, not merely not refused
+    assert hello.swing_angle == pytest.approx(math.radians(2.0), rel=1e-6)
 
 
 def test_set_applies_all_or_none(session, capsys):
