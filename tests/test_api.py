@@ -57,3 +57,4 @@ def test_the_api_page_runs_as_a_notebook(tmp_path, monkeypatch):
     for i, cell in enumerate(cells):
         exec(compile(cell, f"docs/api.md cell {i + 1}", "exec"), ns)  # noqa: S102
     assert (tmp_path / "balance.csv").exists() and (tmp_path / "balance.png").stat().st_size > 20_000
+    assert len(ns["data"]) >= 2500 and abs(ns["tip"][-500:]).max() < 3.0  # the page's run balanced the rod
