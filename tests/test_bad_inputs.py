@@ -131,6 +131,19 @@ def test_a_unit_slip_is_refused_with_the_reading_that_fits(override, line, tmp_p
     assert not (tmp_path / "h.h").exists()
 
 
+def test_fewer_counts_per_turn_than_the_board_accepts_are_refused_before_a_header(tmp_path):
+    """15 counts per output turn: the header would build a firmware whose angle arithmetic divides by a
+    zero-count default (SET and a stored record refuse under 16)."""
+    from host_tools import run_rodctl
+
+    r = run_rodctl("gains", "--set", "encoder.counts_per_motor_rev=1", "--set", "motor.gear_ratio=15",
+                   "--header", str(tmp_path / "h.h"))
+    assert r.returncode == 2 and r.stderr.strip().startswith(
+        "rodctl: encoder.counts_per_motor_rev: times motor.gear_ratio = 15 counts per output turn: the firmware "
+        "needs at least 16"), r.stderr
+    assert not (tmp_path / "h.h").exists()
+
+
 # --- output paths: checked before any work, one line naming the option, exit 2, nothing written ----------
 
 # {f}: a regular file, so {f}/x cannot be written by anyone (root included: root ignores permission bits,

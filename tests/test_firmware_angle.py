@@ -180,7 +180,14 @@ def test_save_rig_stores_the_settings_as_they_were_when_it_arrived():
         dev.write(P.encode(P.SaveRig(), 1) + P.encode(P.Set(P.Param.ENCODER_SIGN, -1.0), 2)
                   + P.encode(P.Set(P.Param.COUNTS_PER_REV, 1958.4), 3))
         dev.step()
-        assert len(dev.eeprom) == 16
+        dev.write(P.encode(P.HelloRequest(), 4))
+        dev.step()
+        frames = P.Decoder().feed(dev.read())
+        acks = [f.msg.result for f in frames if f.type == P.MsgType.ACK]
+        assert acks[:3] == [P.AckResult.OK] * 3  # SAVE_RIG and both SETs were taken ...
+        hello = [f.msg for f in frames if f.type == P.MsgType.HELLO][-1]
+        assert hello.rig & P.RigFlag.ENCODER_REVERSED and (hello.counts_num, hello.counts_den) == (9792, 5)
+        assert len(dev.eeprom) == 16  # ... but the record is the settings SAVE_RIG found
         out = Rig()
         assert core().rod_rig_decode(dev.eeprom, 16, Rig(1, 1, Counts(4896, 5, 0.0, 0.0)), C.byref(out)) == 0x04
         assert (out.encoder_sign, out.counts.num, out.counts.den) == (1, 4896, 5)

@@ -17,13 +17,19 @@ def test_the_default_holds_its_files_friction_and_hunts_without_friction(monkeyp
     table = F.window(frictions=(1.0, 0.0), seconds=20.0, jobs=2)
     held, bare = table[1.0], table[0.0]
     assert held["runs"] == bare["runs"] == 2
-    assert held["past_band"] == 0 and 1.0 < held["median_mean_deg"] < 3.0, held  # the lean on a flank
-    assert bare["past_band"] >= 1, bare  # the rod crosses the gap and swings out
+    # measured: peaks 2.49 / 2.02 deg (balance / swing-up) on its friction, 12.4 / 12.4 without any
+    assert held["max_peak_deg"] < 3.0 and 1.0 < held["median_mean_deg"] < 3.0, held  # the lean on a flank
+    assert bare["max_peak_deg"] > 6.0, bare  # the rod crosses the gap and swings out
 
 
-@pytest.mark.parametrize("argv, says", [(["--frictions", "x"], "--frictions must be multiples >= 0"),
-                                        (["--seconds", "5"], "--seconds more than 10"),
-                                        (["--set", "lqr.nope=1"], "--set lqr.nope: unknown key")])
+@pytest.mark.parametrize("argv, says", [
+    (["--frictions", "x"], "friction_study: --frictions x: distinct finite multiples >= 0"),
+    (["--frictions", "nan"], "friction_study: --frictions nan: distinct finite multiples >= 0"),
+    (["--frictions", "1,1"], "friction_study: --frictions 1,1: distinct"),
+    (["--frictions", "1e9"], "friction_study: motor.coulomb_friction = 5e+06 N m is not a testbed's"),
+    (["--seconds", "5"], "friction_study: --seconds 5: more than 10"),
+    (["--seconds", "abc"], "argument --seconds: invalid float value: 'abc'"),
+    (["--set", "lqr.nope=1"], "friction_study: --set lqr.nope: unknown key")])
 def test_bad_input_is_one_line_and_exit_2(argv, says):
     r = subprocess.run([sys.executable, "-m", "rodctl.sim.friction_study", *argv], capture_output=True, text=True,
                        timeout=120)

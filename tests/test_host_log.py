@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -385,8 +386,8 @@ def test_log_60_seconds_at_1khz_loses_no_frame(tmp_path):
     assert int(meta["frames"]) == len(tl) + frame_events + int(meta["heartbeat_acks"])  # every frame accounted for
     assert 10_000 <= len(tl) <= 61_000  # 60 s of wall time at most; a tenth of it even on a stalled machine
     assert np.allclose(np.diff(tl["time_s"]), 1e-3, atol=1e-6)  # every step's frame, none lost
-    armed = tl[tl["mode_name"] == "CATCH"]
-    assert len(armed) >= len(tl) - 1_000 and not np.any(tl["mode_name"] == "FAULT")  # armed from its first second
+    modes = "".join({"DISARMED": "d", "CATCH": "c"}.get(m, "?") for m in tl["mode_name"])
+    assert re.fullmatch(r"d*c{10000,}d+", modes), set(tl["mode_name"])  # armed once, held, disarmed at the end
     assert tl["mode_name"][-1] == "DISARMED" and tl["reason_name"][-1] == "HOST"
 
 

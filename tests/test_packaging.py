@@ -84,8 +84,8 @@ def installed(wheel, tmp_path_factory):
     zipfile.ZipFile(wheel).extractall(site)
     home = tmp_path_factory.mktemp("outside")
     env = dict(os.environ, PYTHONPATH=str(site), XDG_CACHE_HOME=str(home / "cache"), MPLBACKEND="Agg")
-    env.pop("RODCTL_BUILD_DIR", None)
-    env.pop("RODCTL_DEBUG", None)
+    for clone_only in ("RODCTL_BUILD_DIR", "RODCTL_DEBUG", "RODGAINS_CACHE_DIR"):  # nothing of the clone's
+        env.pop(clone_only, None)
     return site, home, env
 
 

@@ -332,10 +332,11 @@ def check_firmware_limits(p: dict) -> list[tuple[str, str]]:
         cpr = counts_fraction(p)
     except ValueError:
         return out  # reported above
-    if cpr.numerator < 2 or cpr.numerator > 1_000_000 or cpr.denominator > 1000 \
-            or cpr.numerator * cpr.denominator > 10_000_000:
+    lo, _ = _set_range("COUNTS_PER_REV")
+    if cpr < lo or cpr.numerator > 1_000_000 or cpr.denominator > 1000 or cpr.numerator * cpr.denominator > 10_000_000:
         out.append(("encoder.counts_per_motor_rev", f"times motor.gear_ratio = {cpr} counts per output turn: "
-                    "the firmware needs a fraction NUM/DEN with 2 <= NUM <= 1e6, DEN <= 1000, NUM*DEN <= 1e7"))
+                    f"the firmware needs at least {lo:g} (as SET counts_per_rev) and a fraction NUM/DEN with "
+                    "NUM <= 1e6, DEN <= 1000, NUM*DEN <= 1e7"))
     return out
 
 

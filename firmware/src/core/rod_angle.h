@@ -14,6 +14,7 @@
 #include <stdint.h>
 
 #include "rod_config.h"
+#include "rod_protocol_defs.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -25,8 +26,8 @@ extern "C" {
 #define ROD_COUNTS_DEN_MAX 1000
 #define ROD_COUNTS_PRODUCT_MAX 10000000
 /* The fewest counts per turn SET accepts (rodlink.toml COUNTS_PER_REV min): a stored record may not load
- * what SET refuses, and from 16 counts per turn (count / num) den stays below |count|. */
-#define ROD_COUNTS_PER_TURN_MIN 16
+ * what SET refuses, and with num >= 16 den the whole turns (count / num) times den stay below |count| / 16. */
+#define ROD_COUNTS_PER_TURN_MIN ((int32_t)ROD_PARAM_COUNTS_PER_REV_MIN)
 
 /* Encoder counts per output turn, num / den exactly; one turn is 2 num ticks. */
 typedef struct {

@@ -56,8 +56,8 @@
 #if ROD_N < 1 || ROD_N > 64
 #error "ROD_N must be 1..64 (telemetry carries at most 64 edges)"
 #endif
-#if ROD_COUNTS_PER_REV_NUM < 2 || ROD_COUNTS_PER_REV_DEN < 1
-#error "counts per revolution must be a positive fraction NUM / DEN"
+#if ROD_COUNTS_PER_REV_DEN < 1 || ROD_COUNTS_PER_REV_NUM < 16 * ROD_COUNTS_PER_REV_DEN
+#error "counts per revolution must be a fraction NUM / DEN of at least 16 (SET COUNTS_PER_REV's minimum)"
 #endif
 /* rod_angle works in ticks of 1/(2 DEN) count; one turn is 2 NUM ticks, and NUM * DEN products
  * must stay far inside int32 (with room for a few turns of difference). */

@@ -2,24 +2,25 @@
 
 from __future__ import annotations
 
+import argparse
 import sys
 
 # Subcommand modules, each with register(subparsers); imported lazily-light so `rodctl gains` starts fast.
 COMMAND_MODULES = ["gains", "protocol", "docs", "sil", "status", "check", "record", "console", "simdevice", "logconvert", "plot", "scope", "flash", "sim", "bench", "robustness", "tune", "sweep", "identify", "track"]
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse's refusals as every other of rodctl's: one line, exit 2 (the usage is behind --help).
+    Subcommand parsers are made of the same class."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: {message}; see {self.prog} --help\n")
+
+
 def build_parser():
-    import argparse
     import importlib
 
     from rodctl import __version__
-
-    class OneLineParser(argparse.ArgumentParser):
-        """argparse's refusals as every other of rodctl's: one line, exit 2 (the usage is behind --help).
-        Subcommand parsers are made of the same class."""
-
-        def error(self, message):
-            self.exit(2, f"{self.prog}: {message}; see {self.prog} --help\n")
 
     parser = OneLineParser(
         prog="rodctl",

@@ -16,7 +16,7 @@ how many runs peak past the matrix's 3 deg band, and the median of each run's me
 
 from __future__ import annotations
 
-import argparse
+import math
 import sys
 from concurrent.futures import ProcessPoolExecutor
 
@@ -40,13 +40,12 @@ def one_run(job: tuple) -> tuple[float, float]:
              f"motor.coulomb_friction*={friction}")
     r = matrix.run_case(p, matrix.CASES["nominal"], task, seconds=seconds, keep_log=True,
                         extra_plant_overrides=plant)
-    log = r["log"]
-    dev = matrix._deviation_deg(log["theta"]).max(axis=1)[log["time"] >= seconds - WINDOW_S]
-    return float(dev.mean()), float(dev.max())
+    return matrix.tail_deviation_deg(r["log"], WINDOW_S)
 
 
 def window(overrides=(), frictions=FRICTIONS, seconds: float = 30.0, jobs: int = 2) -> dict[float, dict]:
-    """Plant friction multiple -> {'past_band': runs peaking past 3 deg, 'runs', 'median_mean_deg'}."""
+    """Plant friction multiple -> {'past_band': runs peaking past 3 deg, 'runs', 'median_mean_deg',
+    'max_peak_deg': the largest peak of any run}."""
     from rodctl.sim.matrix import ROBUST_BAND_DEG, TASKS
 
     grid = [(tuple(overrides), f, z, b, t, seconds)
@@ -58,12 +57,15 @@ def window(overrides=(), frictions=FRICTIONS, seconds: float = 30.0, jobs: int =
         rows = [r for job, r in zip(grid, results) if job[1] == f]
         means, peaks = np.array([m for m, _ in rows]), np.array([pk for _, pk in rows])
         out[f] = {"past_band": int((peaks > ROBUST_BAND_DEG).sum()), "runs": len(rows),
-                  "median_mean_deg": float(np.median(means))}
+                  "median_mean_deg": float(np.median(means)), "max_peak_deg": float(peaks.max())}
     return out
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m rodctl.sim.friction_study", description=__doc__.split("\n")[0])
+    from rodctl.cli import OneLineParser
+    from rodctl.sim.matrix import ROBUST_BAND_DEG, TASKS, apply_overrides
+
+    ap = OneLineParser(prog="python -m rodctl.sim.friction_study", description=__doc__.split("\n")[0])
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                     help="override one parameter of the design (and the plant's file), e.g. "
                          "lqr.friction_compensation=0.006 (repeatable)")
@@ -73,27 +75,33 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=2, metavar="N", help="runs at once (processes)")
     a = ap.parse_args(argv)
     from rodgains.errors import UserError
+    from rodgains.params import load_params
 
     try:
         frictions = tuple(float(x) for x in a.frictions.split(","))
-        if not frictions or min(frictions) < 0 or not (a.seconds > WINDOW_S) or a.jobs < 1:
-            raise ValueError
     except ValueError:
-        print(f"friction_study: --frictions must be multiples >= 0, --seconds more than {WINDOW_S:g} and "
-              "--jobs at least 1", file=sys.stderr)
-        return 2
+        frictions = ()
+    problem = ""
+    if not frictions or not all(math.isfinite(f) and f >= 0 for f in frictions) or len(set(frictions)) < len(frictions):
+        problem = f"--frictions {a.frictions}: distinct finite multiples >= 0, comma-separated"
+    elif not (WINDOW_S < a.seconds <= 600):
+        problem = f"--seconds {a.seconds:g}: more than {WINDOW_S:g} and at most 600 s"
+    elif a.jobs < 1:
+        problem = f"--jobs {a.jobs}: at least 1"
     try:
-        from rodgains.params import load_params
-
         p = load_params(None, list(a.set))
+        for f in frictions:  # every plant the runs would make, refused here rather than in a worker
+            apply_overrides(p, (f"motor.coulomb_friction*={f}",))
     except UserError as e:
-        print(f"friction_study: {e}", file=sys.stderr)
+        problem = problem or str(e)
+    if problem:
+        print(f"friction_study: {problem}", file=sys.stderr)
         return 2
-    print(f"{len(ZERO_ERRORS_DEG) * len(BACKLASH_DEG) * 2} runs per friction, {a.seconds:g} s each; design: "
-          f"compensation {1e3 * p['lqr']['friction_compensation']:g} mN m for a file's "
+    print(f"{len(ZERO_ERRORS_DEG) * len(BACKLASH_DEG) * len(TASKS)} runs per friction, {a.seconds:g} s each; "
+          f"design: compensation {1e3 * p['lqr']['friction_compensation']:g} mN m for a file's "
           f"{1e3 * p['motor']['coulomb_friction']:g} mN m", file=sys.stderr)
     table = window(tuple(a.set), frictions, a.seconds, a.jobs)
-    print(f"{'plant friction [x file]':>24}  {'runs past 3 deg':>16}  {'median mean [deg]':>18}")
+    print(f"{'plant friction [x file]':>24}  {f'runs past {ROBUST_BAND_DEG:g} deg':>16}  {'median mean [deg]':>18}")
     for f, r in table.items():
         print(f"{f:>24g}  {r['past_band']:>9d} of {r['runs']:<3d}  {r['median_mean_deg']:>18.2f}")
     return 0

@@ -34,11 +34,11 @@ def run(design_p, plant_p, task: str) -> dict[str, float]:
 
     log = matrix.simulate(design_p, plant_p, task, seconds=SECONDS)
     t = log["time"]
-    dev = matrix._deviation_deg(log["theta"]).max(axis=1)
     w = t > t[-1] - WINDOW_S
     bal = w & (log["mode"] == matrix.MODE_BALANCE)
     n = log["controller_edges"]
-    out = {"mean_deg": float(dev[w].mean()), "peak_deg": float(dev[w].max()), "fault": bool((log["mode"] == matrix.MODE_FAULT).any())}
+    mean, peak = matrix.tail_deviation_deg(log, WINDOW_S)
+    out = {"mean_deg": mean, "peak_deg": peak, "fault": bool((log["mode"] == matrix.MODE_FAULT).any())}
     if bal.any():
         err = log["est"][bal, :n] - resample_edges(log["theta"][bal], n, log["plant_bounds"])
         err = np.mod(err + np.pi, 2 * np.pi) - np.pi

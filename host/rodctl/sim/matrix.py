@@ -242,6 +242,13 @@ def _deviation_deg(theta: np.ndarray) -> np.ndarray:
     return np.degrees(np.abs(np.mod(theta, 2 * np.pi) - np.pi))
 
 
+def tail_deviation_deg(log: dict, window_s: float) -> tuple[float, float]:
+    """(mean, peak) of the largest link deviation from upright over a run's last `window_s` [deg]."""
+    t = log["time"]
+    dev = _deviation_deg(log["theta"]).max(axis=1)[t > t[-1] - window_s]
+    return float(dev.mean()), float(dev.max())
+
+
 def simulate(design_p: Params, plant_p: Params, task: str, *, seconds: float, delay_periods: int = 0,
              disturbance=None, progress: Callable[[str, float], None] | None = None, label: str = "",
              start_deg: float = BALANCE_START_DEG) -> dict:
