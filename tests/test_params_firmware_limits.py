@@ -20,7 +20,9 @@ from rodctl import paths
 # message in rod_config.h -> overrides that break it (each must be refused by load_params)
 VIOLATIONS = {
     "ROD_N must be 1..64": [["rod.edges=65"]],
-    "counts per revolution must be a positive fraction": [["encoder.counts_per_motor_rev=1", "motor.gear_ratio=1"]],
+    "counts per revolution must be a fraction NUM / DEN of at least 16": [
+        ["encoder.counts_per_motor_rev=1", "motor.gear_ratio=1"], ["encoder.counts_per_motor_rev=1", "motor.gear_ratio=15"],
+        ["encoder.counts_per_motor_rev=3", "motor.gear_ratio=5.3"]],
     "counts per revolution fraction too large": [["motor.gear_ratio=20.437"]],
     "ROD_LOOP_PERIOD_US outside": [["loop.rate_hz=20000"], ["loop.rate_hz=5"]],
     "ROD_PWM_FREQUENCY_HZ outside": [["driver.pwm_frequency_hz=500"]],
