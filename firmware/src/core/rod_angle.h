@@ -13,8 +13,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
-#include "rod_config.h"
-#include "rod_protocol_defs.h"
+#include "rod_config.h" /* and rod_protocol_defs.h: ROD_PARAM_COUNTS_PER_REV_MIN */
 
 #ifdef __cplusplus
 extern "C" {

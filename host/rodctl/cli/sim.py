@@ -48,6 +48,13 @@ def truth_name(log: Path) -> Path:
     return log.with_name(log.stem + ".truth.csv")
 
 
+def check_new_log(log: Path) -> None:
+    """InputError when writing the log `log` would replace a file: the log's own files or its truth file."""
+    from rodctl.logs.writer import check_new
+
+    check_new(log, also=(truth_name(log),))
+
+
 def write_log(o, trace, path: Path) -> tuple[Path, Path]:
     """The trace in the device log format (rodctl.logs.LogWriter), plus the true state beside it."""
     from rodctl import logs as logfile
@@ -127,9 +134,7 @@ def run_one(args, name: str, params, all_mode: bool = False):
                     raise InputError(f"{flag} {e}") from None
             make_folder(path.parent, f"{flag} {path}")
     if log is not None and args.log and not args.force:  # an explicit --log is never replaced silently
-        from rodctl.logs.writer import check_new
-
-        check_new(log, also=(truth_name(log),))
+        check_new_log(log)
     if plot is not None and not all_mode and args.plot and not args.force and plot.exists():  # nor an explicit --plot
         raise InputError(f"--plot {plot} exists: choose another file name, or --force to replace it")
     prog = Progress(name)
@@ -148,12 +153,9 @@ def run_one(args, name: str, params, all_mode: bool = False):
     if log is not None:
         traces = o.traces
         if len(traces) > 1 and args.log and not args.force:
-            from rodctl.logs.writer import check_new
-
             for tr in traces:
                 tag = re.sub(r"[^A-Za-z0-9.]+", "-", tr.label).strip("-")
-                one = log.with_name(f"{log.stem}-{tag}{log.suffix}")
-                check_new(one, also=(truth_name(one),))
+                check_new_log(log.with_name(f"{log.stem}-{tag}{log.suffix}"))
         if len(traces) == 1:
             written += [str(f) for f in write_log(o, traces[0], log)]
         else:
