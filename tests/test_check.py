@@ -7,12 +7,13 @@ import json
 import os
 import pty
 import re
+import select
 import signal
 import time
 
 import pytest
 
-from host_tools import run_rodctl, sim_device, start_rodctl
+from host_tools import run_rodctl, sim_device, start_rodctl, until
 
 ENCODER_SIGN_FIX = ("Fix: the encoder counts backwards: flip the board's encoder sign (`rodctl check --fix` stores "
                     "it), or swap the encoder's A and B wires")
@@ -34,7 +35,7 @@ def test_a_right_board_passes_every_step_and_writes_the_json(tmp_path):
     assert list(lines) == list(STEPS)
     assert all(ln.startswith("PASS") for ln in lines.values()), r.stdout
     assert "the design of gains/rodgains/default.toml" in lines["identity"]
-    assert "signs encoder +1 motor +1, 979.2 counts/turn (compiled defaults)" in lines["identity"]
+    assert "signs encoder +1 motor +1, 979.2 counts/turn (not stored on the board)" in lines["identity"]
     assert "0 overruns; telemetry 1000 of 1000 Hz, 0 frames dropped" in lines["loop"]
     assert "the turn read +2" in lines["encoder"]  # about +245 counts: a quarter turn of 979.2
     assert "tripped HEARTBEAT after 0.50" in lines["heartbeat"]
@@ -70,7 +71,7 @@ FAULTS = {
                           "Fix: the board takes its zero at power-on: let the rod hang still, then reset the board "
                           "(its button, or unplug and replug USB)"),
     "header=stale": ("identity", "firmware 0.1.0, protocol v2, N=8 at 1000 Hz, signs encoder +1 motor +1, "
-                                 "979.2 counts/turn (compiled defaults), header ",
+                                 "979.2 counts/turn (not stored on the board), header ",
                      "Fix: the board runs another design: flash this one with `rodctl flash`"),
 }
 
@@ -185,7 +186,19 @@ def test_ctrl_c_during_the_pulses_leaves_the_board_disarmed():
                 break
             seen += line
         assert "motor:" in seen, seen
-        time.sleep(0.2)  # the pulses are playing
+        # the virtual board reports its mode changes on stderr; its first IDENTIFY is the pulses
+        said = bytearray()
+
+        def board_said() -> str:
+            fd = dev.stderr.fileno()
+            while select.select([fd], [], [], 0)[0]:
+                chunk = os.read(fd, 65536)
+                if not chunk:
+                    break
+                said.extend(chunk)
+            return said.decode(errors="replace")
+
+        assert until(lambda: "-> IDENTIFY" in board_said(), timeout=60), board_said()
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=30)
         assert proc.returncode == 130

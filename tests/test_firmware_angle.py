@@ -195,6 +195,45 @@ def test_save_rig_stores_the_settings_as_they_were_when_it_arrived():
         dev.close()
 
 
+def test_hello_flags_stored_only_while_the_settings_in_use_are_the_stored_ones(tmp_path):
+    """STORED means the settings survive a power cycle as they are: a SET after SAVE_RIG (or after a
+    power-on from storage) clears it, setting the stored value back raises it again."""
+    from rodctl.sim.device import VirtualDevice
+
+    def hello_after(dev, *msgs):
+        dev.write(b"".join(P.encode(m, i + 1) for i, m in enumerate((*msgs, P.HelloRequest()))))
+        dev.step()
+        frames = P.Decoder().feed(dev.read())
+        assert [f.msg.result for f in frames if f.type == P.MsgType.ACK] == [P.AckResult.OK] * (len(msgs) + 1)
+        return [f.msg for f in frames if f.type == P.MsgType.HELLO][-1]
+
+    eeprom = tmp_path / "eeprom.bin"
+    dev = VirtualDevice.from_options(eeprom=str(eeprom))
+    try:
+        dev.step()
+        dev.read()
+        assert not hello_after(dev).rig & P.RigFlag.STORED  # nothing stored: the compiled defaults
+        # STORED once the board's main loop has taken the record to write (after the step)
+        assert not hello_after(dev, P.Set(P.Param.ENCODER_SIGN, -1.0), P.SaveRig()).rig & P.RigFlag.STORED
+        assert hello_after(dev).rig & P.RigFlag.STORED and len(dev.eeprom) == 16
+        flipped = hello_after(dev, P.Set(P.Param.MOTOR_SIGN, -1.0))
+        assert flipped.rig & P.RigFlag.MOTOR_REVERSED and not flipped.rig & P.RigFlag.STORED
+        assert hello_after(dev, P.Set(P.Param.MOTOR_SIGN, 1.0)).rig & P.RigFlag.STORED
+        assert not hello_after(dev, P.Set(P.Param.COUNTS_PER_REV, 1958.4)).rig & P.RigFlag.STORED
+    finally:
+        dev.close()
+    dev = VirtualDevice.from_options(eeprom=str(eeprom))  # power-on from the record
+    try:
+        dev.step()
+        dev.read()
+        hello = hello_after(dev)
+        assert hello.rig & P.RigFlag.STORED and hello.rig & P.RigFlag.ENCODER_REVERSED
+        assert (hello.counts_num, hello.counts_den) == (4896, 5)
+        assert not hello_after(dev, P.Set(P.Param.ENCODER_SIGN, 1.0)).rig & P.RigFlag.STORED
+    finally:
+        dev.close()
+
+
 def test_a_counts_value_with_no_small_fraction_gets_the_closest_that_fits():
     c = Counts()
     assert core().rod_counts_from_value(314.159265, C.byref(c))

@@ -1,6 +1,8 @@
 /* rod_device.c -- one step: apply commands, run the control, queue numbered frames. */
 #include "rod_device.h"
 
+#include <string.h>
+
 #include "rod_version.h"
 
 static const uint8_t gains_sha256[32] = ROD_GAINS_SHA256_BYTES_INIT;
@@ -15,13 +17,34 @@ void rod_device_init(rod_device_t *dev)
     dev->steps_since_hello = 0;
     dev->hello_wanted = true; /* announce ourselves on the first step */
     dev->board_fault = ROD_REASON_NONE;
-    dev->rig_source = 0u;
+    dev->rig_corrupt = 0u;
+    memset(dev->rig_kept, 0, sizeof dev->rig_kept);
     dev->save_wanted = false;
 }
 
 void rod_device_load_rig(rod_device_t *dev, const uint8_t *stored, size_t n, rod_rig_t defaults)
 {
-    dev->rig_source = rod_rig_decode(stored, n, defaults, &dev->control.settings.rig);
+    uint8_t source = rod_rig_decode(stored, n, defaults, &dev->control.settings.rig);
+    dev->rig_corrupt = source & ROD_RIG_FLAG_STORE_CORRUPT;
+    if (source & ROD_RIG_FLAG_STORED) {
+        /* re-encoded, so an older layout compares equal to the settings it gave */
+        rod_rig_encode(&dev->control.settings.rig, dev->rig_kept);
+    } else {
+        memset(dev->rig_kept, 0, sizeof dev->rig_kept);
+    }
+}
+
+/* STORED: the settings in use are the record in storage (a SET since then clears it), and the main
+ * loop has taken any SAVE_RIG's record to write. */
+static uint8_t rig_flags(const rod_device_t *dev)
+{
+    uint8_t now[ROD_RIG_STORE_SIZE];
+    rod_rig_encode(&dev->control.settings.rig, now);
+    uint8_t flags = (uint8_t)(rod_rig_sign_flags(&dev->control.settings.rig) | dev->rig_corrupt);
+    if (!dev->save_wanted && memcmp(now, dev->rig_kept, sizeof now) == 0) {
+        flags |= ROD_RIG_FLAG_STORED;
+    }
+    return flags;
 }
 
 bool rod_device_take_save(rod_device_t *dev, uint8_t out[ROD_RIG_STORE_SIZE])
@@ -37,7 +60,6 @@ bool rod_device_take_save(rod_device_t *dev, uint8_t out[ROD_RIG_STORE_SIZE])
         }
         __atomic_signal_fence(__ATOMIC_SEQ_CST);
     } while (dev->save_wanted);
-    dev->rig_source = ROD_RIG_FLAG_STORED;
     return true;
 }
 
@@ -81,6 +103,8 @@ static uint8_t apply_command(rod_device_t *dev, const rod_msg_command_t *cmd)
         /* The settings as they are now: a SET after this one must not reach the stored record,
          * and the main loop must not encode a num / den pair this interrupt is changing. */
         rod_rig_encode(&c->settings.rig, dev->save_bytes);
+        memcpy(dev->rig_kept, dev->save_bytes, sizeof dev->rig_kept);
+        dev->rig_corrupt = 0u;
         __atomic_signal_fence(__ATOMIC_SEQ_CST);
         dev->save_wanted = true;
         return ROD_ACK_OK;
@@ -188,7 +212,7 @@ static void queue_hello(rod_device_t *dev, uint32_t now_us)
     h->n = ROD_N;
     h->mode = c->mode;
     h->reason = c->reason;
-    h->rig = (uint8_t)(rod_rig_sign_flags(&c->settings.rig) | dev->rig_source);
+    h->rig = rig_flags(dev);
     h->period_us = ROD_LOOP_PERIOD_US;
     h->decimation = c->settings.decimation;
     h->swing_amplitude = c->settings.swing_amplitude;

@@ -38,7 +38,8 @@ typedef struct {
     uint32_t steps_since_hello;
     bool hello_wanted;
     uint8_t board_fault; /* ROD_REASON_* the board reported (rod_device_board_fault), NONE normally */
-    uint8_t rig_source;  /* ROD_RIG_FLAG_STORED / _STORE_CORRUPT: where the signs came from */
+    uint8_t rig_corrupt; /* ROD_RIG_FLAG_STORE_CORRUPT until SAVE_RIG, when storage held an unreadable record */
+    uint8_t rig_kept[ROD_RIG_STORE_SIZE]; /* step only: the record in storage (rod_rig_encode), all 0 when none */
     volatile bool save_wanted; /* SAVE_RIG arrived; the main loop stores save_bytes */
     uint8_t save_bytes[ROD_RIG_STORE_SIZE]; /* the rig settings as SAVE_RIG found them (rod_rig_encode) */
 } rod_device_t;
@@ -71,7 +72,8 @@ bool rod_device_post_command(rod_device_t *dev, const rod_msg_command_t *cmd);
 void rod_device_board_fault(rod_device_t *dev, uint8_t reason);
 
 /* Power-on, before the timer starts: the signs the board kept (rod_rig.h; NULL / 0 when it has
- * none), or the compiled defaults when it has none or they are unreadable (HELLO says which). */
+ * none), or the compiled defaults when it has none or they are unreadable. HELLO flags STORED while
+ * the settings in use are the record in storage, so a SET after a power-on or a SAVE_RIG clears it. */
 void rod_device_load_rig(rod_device_t *dev, const uint8_t *stored, size_t n, rod_rig_t defaults);
 
 /* Main loop: after a SAVE_RIG, true once with the bytes to keep (ROD_RIG_STORE_SIZE) in out;

@@ -210,13 +210,13 @@ SETTINGS = {s.name: s for s in (
 
 
 def rig_source(hello) -> str:
-    """Where the board's wiring signs came from at power-on (HELLO rig bits)."""
+    """Whether the rig settings in use are the ones stored on the board (HELLO rig bits)."""
     rig = int(hello.rig)
     if rig & int(P.RigFlag.STORE_CORRUPT):
         return "compiled defaults: the stored settings were unreadable"
     if rig & int(P.RigFlag.STORED):
         return "stored on the board"
-    return "compiled defaults"
+    return "not stored on the board"  # the compiled defaults, or a SET since power-on
 
 
 def parse_assignment(text: str) -> tuple[Setting, float]:
@@ -703,8 +703,13 @@ class Session:
         """SAVE_RIG: store the rig settings in use (signs, counts per turn) on the board for every
         power-on; returns the settings its HELLO reports afterwards (user units)."""
         self.command(P.SaveRig(), what="save-rig")
-        time.sleep(0.05)  # the board writes its EEPROM in its main loop, after the ACK
-        return hello_settings(self.request_hello())
+        # the board takes the record to its EEPROM in its main loop, after the ACK: HELLO flags STORED then
+        deadline = time.monotonic() + 2.0
+        while not (hello := self.request_hello()).rig & P.RigFlag.STORED:
+            if time.monotonic() > deadline:
+                raise UserError(f"{self.port}: the board did not report the rig settings stored within 2 s")
+            time.sleep(0.02)
+        return hello_settings(hello)
 
     def set_all(self, pairs: list[tuple[Setting, float]], design_params=None) -> dict[str, float]:
         """Apply every (setting, value) or none; returns the device's settings afterwards (user units).
