@@ -9,13 +9,23 @@ import pytest
 
 from firmware_sil import header_path
 from rodctl import paths
-from rodctl.build import target_build
+from rodctl.build import native, target_build
 from rodgains.errors import UserError
 
 WARN = ["-std=c11", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror"]
 ARM = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-O2", "-fsingle-precision-constant"]
 SIL = paths.FIRMWARE / "sil"
 needs_arm = pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None, reason="arm-none-eabi-gcc not installed")
+
+
+@pytest.fixture(scope="module")
+def host_cc() -> str:
+    """The compiler the SIL library is built with (rodctl.build.native: $CC, else gcc), resolved once: the
+    host checks here hold for that build, and every test of the module uses the same one."""
+    try:
+        return shutil.which(native.compiler())
+    except UserError as e:
+        pytest.skip(f"no host C compiler for the SIL build: {e}")
 
 
 def compile_c(cc: str, source: Path, include: list[Path], extra=(), out: Path | None = None) -> subprocess.CompletedProcess:
@@ -30,11 +40,11 @@ def headers() -> dict[str, Path]:
 
 
 @pytest.mark.parametrize("which", ["committed", "n2", "n20"])
-def test_core_and_sil_compile_warning_free_on_the_host(which, tmp_path):
+def test_core_and_sil_compile_warning_free_on_the_host(which, host_cc, tmp_path):
     inc = [headers()[which].parent, paths.CORE_SRC, SIL]
     for src in [*sorted(paths.CORE_SRC.glob("*.c")), SIL / "rod_sil.c"]:
-        r = compile_c("gcc", src, inc, ["-O2"], tmp_path / (src.stem + ".o"))
-        assert r.returncode == 0 and not r.stderr, f"{src.name}: {r.stderr}"
+        r = compile_c(host_cc, src, inc, ["-O2"], tmp_path / (src.stem + ".o"))
+        assert r.returncode == 0 and not r.stderr, f"{host_cc} {src.name}: {r.stderr}"
 
 
 @needs_arm
@@ -69,9 +79,11 @@ def stale_header(tmp_path: Path, edit) -> Path:
     return d
 
 
-@pytest.mark.parametrize("cc", ["gcc", "arm-none-eabi-gcc"])
-def test_stale_schema_version_stops_the_build(cc, tmp_path):
-    if shutil.which(cc) is None:
+@pytest.mark.parametrize("cc", ["host", "arm-none-eabi-gcc"])
+def test_stale_schema_version_stops_the_build(cc, request, tmp_path):
+    if cc == "host":
+        cc = request.getfixturevalue("host_cc")
+    elif shutil.which(cc) is None:
         pytest.skip(f"{cc} not installed")
     d = stale_header(tmp_path, lambda t: re.sub(r"(#define ROD_GAINS_SCHEMA_VERSION\s+)\d+", r"\g<1>999", t))
     r = compile_c(cc, tmp_path / "uses_config.c", [d, paths.CORE_SRC])
@@ -79,9 +91,9 @@ def test_stale_schema_version_stops_the_build(cc, tmp_path):
     assert "#error" in r.stderr and "ROD_GAINS_SCHEMA_VERSION" in r.stderr
 
 
-def test_missing_macro_stops_the_build(tmp_path):
+def test_missing_macro_stops_the_build(host_cc, tmp_path):
     d = stale_header(tmp_path, lambda t: re.sub(r"#define ROD_SPEED_LIMIT_RAD_S.*\n", "", t))
-    r = compile_c("gcc", tmp_path / "uses_config.c", [d, paths.CORE_SRC])
+    r = compile_c(host_cc, tmp_path / "uses_config.c", [d, paths.CORE_SRC])
     assert r.returncode != 0 and "lacks a macro" in r.stderr
 
 
@@ -119,10 +131,10 @@ def test_core_and_sil_compile_with_clang(which, tmp_path):
         assert r.returncode == 0 and not r.stderr, f"{src.name}: {r.stderr}"
 
 
-def test_current_header_compiles(tmp_path):
+def test_current_header_compiles(host_cc, tmp_path):
     src = tmp_path / "uses_config.c"
     src.write_text('#include "rod_config.h"\nint rod_config_probe;\n')
-    r = compile_c("gcc", src, [paths.COMMITTED_HEADER.parent, paths.CORE_SRC])
+    r = compile_c(host_cc, src, [paths.COMMITTED_HEADER.parent, paths.CORE_SRC])
     assert r.returncode == 0, r.stderr
 
 

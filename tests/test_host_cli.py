@@ -169,8 +169,7 @@ def _xvfb() -> bool:
 def test_live_plot_runs_in_a_window_under_a_virtual_display():
     import subprocess
 
-    env = rodctl_env()
-    env.pop("MPLBACKEND", None)
+    env = rodctl_env(MPLBACKEND="TkAgg")  # the window tkinter (checked above) makes, whatever else is installed
     r = subprocess.run(["xvfb-run", "-a", *__import__("host_tools").RODCTL, "plot", "--live", "--port", "sim://",
                         "--duration", "2"], capture_output=True, text=True, timeout=120, env=env)
     assert r.returncode == 0, r.stderr

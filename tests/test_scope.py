@@ -18,6 +18,10 @@ from host_tools import RODCTL, ctrl_c_as_at_a_terminal, rodctl_env, until
 
 from rodctl.link import protocol as P
 
+# matplotlib would pick a window backend by what is installed (Qt before Tk) and a user's MPLBACKEND or
+# matplotlibrc could name another: the tests drive Tk's window, so they say so
+WINDOW_BACKEND = "TkAgg"
+
 
 @pytest.fixture
 def xdisplay():
@@ -40,8 +44,7 @@ def xdisplay():
 
 
 def _start_scope(display: str, *args):
-    env = rodctl_env(DISPLAY=display)
-    env.pop("MPLBACKEND", None)
+    env = rodctl_env(DISPLAY=display, MPLBACKEND=WINDOW_BACKEND)
     return subprocess.Popen([*RODCTL, "scope", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=env, preexec_fn=ctrl_c_as_at_a_terminal)
 
@@ -223,8 +226,7 @@ def test_each_key_does_what_the_window_says_and_no_dialog_opens(xdisplay, tmp_pa
     q quit) are off, so no window but the scope's ever opens."""
     if shutil.which("xdotool") is None:
         pytest.fail("xdotool is not installed (bash .ci/run installs it)")
-    env = rodctl_env(DISPLAY=xdisplay)
-    env.pop("MPLBACKEND", None)
+    env = rodctl_env(DISPLAY=xdisplay, MPLBACKEND=WINDOW_BACKEND)
     proc = subprocess.Popen([*RODCTL, "scope", "--port", "sim://?theta0_deg=150", "--duration", "90"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
     said: list[str] = []
