@@ -3,7 +3,7 @@
     python3 -m rodctl.bench.logs
 
 A 1,000,000-frame N=5 CSV log (16.7 min at 1 kHz, a swing-up-like trace) is made once in
-build/bench-log-1M.csv. Measured: read_log of the plot's columns [frames/s], `rodctl plot LOG --out
+the build folder (rodctl.paths.BUILD), bench-log-1M.csv. Measured: read_log of the plot's columns [frames/s], `rodctl plot LOG --out
 PNG` as a separate process [log MB per wall second] and that process's peak resident memory [MB],
 and the vectorized telemetry decoder (link/batch.py) [frames/s].
 """
@@ -19,6 +19,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from rodctl import paths
 
 FRAMES = 1_000_000
 
@@ -120,7 +122,7 @@ def decode_rate(seconds: float = 2.0, n: int = 5) -> float:
     return statistics.median(rates)
 
 
-def measure(quick: bool = False, build: Path = Path("build")) -> dict[str, float]:
+def measure(quick: bool = False, build: Path = paths.BUILD) -> dict[str, float]:
     frames = 200_000 if quick else FRAMES
     path = make_log(build / f"bench-log-{frames // 1000}k.csv", frames)
     speed, peak = plot_process(path, runs=1 if quick else 3)

@@ -1,5 +1,5 @@
 """How fast `rodctl track` reads a 720p video: the streamed pass (decode, marker detection, repeat
-check), frames per wall second, on a rendered clip of the simulated rod (build/bench-track-720p.mp4)."""
+check), frames per wall second, on a rendered clip of the simulated rod (bench-track-720p.mp4 in the build folder)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-CLIP = Path("build") / "bench-track-720p.mp4"
+from rodctl import paths
+
+CLIP = paths.BUILD / "bench-track-720p.mp4"
 
 
 def make_clip(path: Path = CLIP, fps: float = 60.0, seconds: float = 3.0) -> Path:
