@@ -74,14 +74,19 @@ def test_a_bad_sim_url_is_bad_input_not_a_board_fault(url, says):
     assert line.startswith("rodctl: ") and says in line
 
 
+# inf or 1e300 s would be "until stopped" spelt as a number: that is leaving --duration out
 @pytest.mark.parametrize("argv", [["log", "--duration", "0", "--port", "/dev/ttyNOPE0", "--out"],
+                                  ["log", "--duration", "inf", "--port", "sim://", "--out"],
                                   ["arm", "--balance", "--duration", "nan", "--port", "/dev/ttyNOPE0", "--out"],
-                                  ["sim-device", "--pty", "--duration", "-1", "--link"]])
-def test_a_non_positive_duration_is_refused_before_the_board_or_the_file(argv, tmp_path):
+                                  ["arm", "--swing-up", "--duration", "1e300", "--port", "sim://", "--out"],
+                                  ["sim-device", "--pty", "--duration", "-1", "--link"],
+                                  ["sim-device", "--pty", "--duration", "inf", "--link"]])
+def test_a_duration_not_in_a_week_is_refused_before_the_board_or_the_file(argv, tmp_path):
     out = tmp_path / "run.csv"  # the log, or the sim-device's link
     r = run_rodctl(*argv, str(out))
     assert r.returncode == 2, r.stderr
-    assert _one_line(r).endswith(": must be > 0 s") and not out.exists()
+    assert _one_line(r).endswith(": must be in (0, 604800] s; leave it out to run until stopped")
+    assert not out.exists()
 
 
 @pytest.mark.parametrize("argv, what, folder", [
@@ -264,6 +269,14 @@ def test_sweep_and_robustness_do_not_replace_a_file_without_force(argv, option, 
     (["bench", "--only", "m4,"], "rodctl: --only 'm4,'"),
     (["scope", "--port", "sim://", "--window", "-1"], "rodctl: --window -1"),
     (["scope", "--port", "sim://", "--window", "nan"], "rodctl: --window nan"),
+    # a Monte Carlo count past uncertainty.samples' bound would build its runs until memory runs out
+    (["robustness", "--samples", "100001", "--json", "", "--plot", ""],
+     "rodctl: --samples 100001: must be between 0 and 100,000"),
+    (["tune", "--samples", "100000000", "--budget", "1", "--out", "{tmp}/t.toml"], "rodctl: --samples 100000000"),
+    (["sweep", "--scenario", "score", "--samples", "100001", "--grid", "rod.length=0.15", "--out", "{tmp}/s.parquet"],
+     "rodctl: --samples 100001"),
+    (["scope", "--port", "sim://", "--duration", "inf"], "rodctl: --duration inf: must be in (0, 604800] s"),
+    (["scope", "--port", "sim://", "--set", "gearbox.backlash_deg=-1"], "rodctl: gearbox.backlash_deg: must be"),
 ])
 def test_numbers_out_of_range_are_one_line_before_any_work(argv, start, tmp_path, capsys):
     from rodctl.cli import main
@@ -470,3 +483,94 @@ def test_more_bad_input_is_exit_2(tmp_path, argv, line):
     r = run_rodctl(*[a.replace("{missing}", missing) for a in argv], cwd=tmp_path)
     assert r.returncode == 2 and _one_line(r) == line.replace("{missing}", missing)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_killed_tune_s_cut_journal_line_is_named_and_left_as_it_was(tmp_path, capsys):
+    """A tune killed mid-write leaves its journal's last line cut short: resuming names the file and line,
+    exit 2, and appends nothing to it (Optuna would have written first and then failed to read it)."""
+    from rodctl.cli import main
+
+    study = tmp_path / "st"
+    argv = ["tune", "--cases", "nominal", "--samples", "0", "--seconds", "0.2", "--jobs", "1", "--budget", "1",
+            "--no-goals", "--study", str(study), "--out", str(tmp_path / "t.toml")]
+    assert main(argv) in (0, 1)
+    (tmp_path / "t.toml").unlink()
+    journal = study / "journal.log"
+    whole = journal.read_bytes()
+    cut = whole[:-7]  # the last record without its end
+    journal.write_bytes(cut)
+    capsys.readouterr()
+    assert main(argv) == 2
+    n = whole.count(b"\n")
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        f"rodctl: --study {study}: journal.log line {n} is not a whole record (cut short when a run was killed?); "
+        "delete that line to resume, or use a new --study folder")
+    assert journal.read_bytes() == cut and not (tmp_path / "t.toml").exists()
+    journal.write_bytes(whole)
+    (study / "study.json").write_text('{"cases": ')
+    assert main(argv) == 2
+    assert capsys.readouterr().err.splitlines()[-1].startswith(
+        f"rodctl: --study {study}: study.json is not this command's JSON")
+    assert journal.read_bytes() == whole
+
+
+def test_protocol_writes_neither_file_when_one_cannot_be_written(tmp_path, capsys):
+    """A file where docs/ should be: one line, exit 2, and the C header is not written either."""
+    import shutil
+
+    from rodctl import paths
+    from rodctl.cli import main
+
+    (tmp_path / "firmware" / "protocol").mkdir(parents=True)
+    shutil.copy(paths.SPEC, tmp_path / "firmware" / "protocol" / "rodlink.toml")
+    (tmp_path / "docs").write_text("a file, not a folder\n")
+    assert main(["protocol", "--root", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].endswith(f"{tmp_path / 'docs'} is a file, not a folder"), err
+    assert not (tmp_path / "firmware" / "src").exists()
+
+
+def test_sim_of_several_runs_writes_nothing_when_one_log_exists(tmp_path, capsys):
+    """fig2 writes a log per run (LOG-<label>.csv), named once it has run: an existing one stops the command
+    before the figure or any log is written."""
+    from rodctl.cli import main
+
+    argv = ["sim", "--scenario", "fig2", "--duration", "0.3", "--log", str(tmp_path / "f.csv"), "--plot",
+            str(tmp_path / "f.png")]
+    assert main([*argv[:-4], "--log", str(tmp_path / "probe" / "f.csv"), "--no-plot"]) in (0, 1)  # 1: 0.3 s is short
+    runs = sorted(p.name for p in (tmp_path / "probe").iterdir() if p.suffix == ".csv" and ".truth" not in p.name
+                  and ".events" not in p.name)
+    assert len(runs) > 1, runs
+    (tmp_path / runs[-1]).write_text("mine\n")
+    capsys.readouterr()
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("rodctl: ") and "--force" in err[-1], err
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["probe", runs[-1]])
+    assert (tmp_path / runs[-1]).read_text() == "mine\n"
+
+
+def test_sil_lib_into_a_folder_keeps_a_library_already_there(tmp_path):
+    lib = run_rodctl("sil-lib", "-o", f"{tmp_path}/")
+    assert lib.returncode == 0, lib.stderr
+    path = tmp_path / lib.stdout.strip().splitlines()[-1].rsplit("/", 1)[-1]
+    path.write_bytes(b"mine")
+    r = run_rodctl("sil-lib", "-o", f"{tmp_path}/")
+    assert r.returncode == 2 and _one_line(r) == f"rodctl: --output {path} exists; pass --force to overwrite"
+    assert path.read_bytes() == b"mine"
+    assert run_rodctl("sil-lib", "-o", f"{tmp_path}/", "--force").returncode == 0 and path.read_bytes() != b"mine"
+
+
+def test_a_folder_where_a_log_s_events_file_goes_is_a_warning_not_a_crash(tmp_path):
+    """The telemetry is still converted; the events are named as unreadable (one warning line)."""
+    import pandas as pd
+
+    log = _a_log(tmp_path)
+    events = log.with_name(log.name + ".events.csv")
+    events.unlink()
+    events.mkdir()
+    r = run_rodctl("log-convert", str(log), "--out", str(tmp_path / "o.parquet"))
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.strip().splitlines() == [f"rodctl: warning: {events}: not a file; reading the log without its "
+                                             "events"]
+    assert len(pd.read_parquet(tmp_path / "o.parquet")) == len(pd.read_csv(log))

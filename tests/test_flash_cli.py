@@ -92,8 +92,24 @@ def test_missing_environment_is_one_line(tmp_path, monkeypatch, capsys):
     _fake_pio(tmp_path, monkeypatch)
     _offline(monkeypatch)
     proj = _project(tmp_path, "[env:uno]\nplatform = atmelavr\n")
-    assert cli.main(["build", "--project-dir", str(proj)]) == 1
-    assert _one_line(capsys) == f"rodctl: {proj / 'platformio.ini'} has no [env:teensy35] (environments: uno)"
+    assert cli.main(["build", "--project-dir", str(proj)]) == 2
+    assert _one_line(capsys) == (f"rodctl: --env teensy35: {proj / 'platformio.ini'} has no [env:teensy35] "
+                                 "(environments: uno)")
+
+
+@pytest.mark.parametrize("argv, line", [
+    (["--set", "rod.bogus=1"], "rodctl: --set rod.bogus: unknown key"),
+    (["--set", "gearbox.backlash_deg=-1"], "rodctl: gearbox.backlash_deg: must be between 0 and 10"),
+    (["--project-dir", "{missing}"], "rodctl: --project-dir {missing}: no platformio.ini there"),
+])
+@pytest.mark.parametrize("command", [["build"], ["flash", "--upload-port", "/dev/ttyACM0"]])
+def test_bad_input_is_named_before_looking_for_platformio(no_pio, capsys, tmp_path, command, argv, line):
+    """The user's own mistake comes first (exit 2), not a PlatformIO this machine happens to lack."""
+    missing = str(tmp_path / "missing")
+    header = paths.COMMITTED_HEADER.read_bytes()
+    assert cli.main([*command, *(a.replace("{missing}", missing) for a in argv)]) == 2
+    assert _one_line(capsys).startswith(line.replace("{missing}", missing))
+    assert paths.COMMITTED_HEADER.read_bytes() == header
 
 
 def test_online_without_the_platform_runs_platformio_and_summarizes_its_failure(tmp_path, monkeypatch, capsys):

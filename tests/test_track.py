@@ -164,17 +164,20 @@ def test_a_video_without_the_markers_is_refused(filmed, tmp_path):
     (["LOG", "--log", "LOG"], "OpenCV cannot read it as a video"),
     (["VIDEO", "--log", "LOG", "--calibrate", "VIDEO", "--board", "2x2"], "--board '2x2': at least 3x3 inner corners"),
     (["VIDEO", "--log", "FOLDER"], "is a folder, not a file"),
+    (["VIDEO", "--log", "LOG", "--at", "nan"], "--at 'nan': times [s] on the log's clock"),
+    # known once the video is tracked: refused before the Parquet, the MCAP or the figure is written
+    (["VIDEO", "--log", "LOG", "--plot", "PNG", "--at", "1,1e9"], "--at 1e+09: outside the tracked span"),
 ])
 def test_bad_input_is_one_line_and_exit_2(filmed, tmp_path, args, message):
     d = filmed[60]
     args = [str(d["video"]) if a == "VIDEO" else str(d["log"]) if a == "LOG" else str(tmp_path) if a == "FOLDER"
-            else a for a in args]
+            else str(tmp_path / "t.png") if a == "PNG" else a for a in args]
     if "--out" not in args:
         args += ["--out", str(tmp_path / "t.parquet")]
     r = run_rodctl("track", *args, "--quiet", timeout=120)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert message in r.stderr
-    assert not (tmp_path / "t.parquet").exists()
+    assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize("existing", ["t.parquet", "t.mcap", "t.png"])

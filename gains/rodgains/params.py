@@ -82,6 +82,7 @@ PLANT_MODELS = ("der", "inextensible")
 GEARBOX_MODELS = ("compliant", "rigid")
 ENCODER_LOCATIONS = ("motor", "output")
 PLANT_MAX_EDGES = 200  # the simulated plant's discretization; beyond this a run costs minutes per second
+MAX_SAMPLES = 100_000  # Monte Carlo plants per score (uncertainty.samples, --samples): each is a run per task
 
 SCHEMA: dict[str, dict[str, Key]] = {
     "rod": {
@@ -224,7 +225,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
     # (host/rodctl/robust/uncertainty.py). The design never sees them. *_rel: uniform within
     # +- that fraction of the value; *_factor: log-uniform between value / factor and value x factor.
     "uncertainty": {
-        "samples": Key(int, "-", _between(0, 100000)),
+        "samples": Key(int, "-", _between(0, MAX_SAMPLES)),
         "seed": Key(int, "-", _between(0, 2**32 - 1)),
         "youngs_modulus_rel": Key(float, "-", _between(0.0, 0.9)),
         "density_rel": Key(float, "-", _between(0.0, 0.9)),

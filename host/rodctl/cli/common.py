@@ -111,10 +111,15 @@ class RateMeter:
         return (frames - f0) / (now - t0) if now > t0 else 0.0
 
 
+MAX_WALL_DURATION_S = 7 * 86400.0
+
+
 def check_duration(seconds: float | None) -> None:
-    """--duration [s]: None runs until stopped; anything else must be > 0 (InputError, exit 2)."""
-    if seconds is not None and not seconds > 0:
-        raise InputError(f"--duration {seconds:g}: must be > 0 s")
+    """--duration [s] of wall time: None runs until stopped; anything else must be in (0, a week]
+    (InputError, exit 2): inf or 1e300 would only be "until stopped" spelt as a number."""
+    if seconds is not None and not 0 < seconds <= MAX_WALL_DURATION_S:
+        raise InputError(f"--duration {seconds:g}: must be in (0, {MAX_WALL_DURATION_S:g}] s; leave it out to run "
+                         "until stopped")
 
 
 def mode_text(mode, reason) -> str:

@@ -25,7 +25,7 @@ import threading
 import time
 from pathlib import Path
 
-from rodgains.errors import UserError
+from rodgains.errors import InputError, UserError
 
 from rodctl import paths
 from rodctl.link.session import is_tty
@@ -55,8 +55,8 @@ def env_platform(project: Path, env: str) -> str:
     """The platform of [env:ENV] in PROJECT/platformio.ini."""
     ini = project / "platformio.ini"
     if not ini.is_file():
-        raise UserError(f"no platformio.ini in {project}: the firmware's PlatformIO project is not there "
-                        "(pass --project-dir DIR)")
+        raise InputError(f"--project-dir {project}: no platformio.ini there: the firmware's PlatformIO project is "
+                         "not there")
     cp = configparser.ConfigParser(interpolation=None, strict=False)
     try:
         cp.read(ini)
@@ -65,7 +65,7 @@ def env_platform(project: Path, env: str) -> str:
     sec = f"env:{env}"
     if not cp.has_section(sec):
         envs = [s[4:] for s in cp.sections() if s.startswith("env:")]
-        raise UserError(f"{ini} has no [env:{env}] (environments: {', '.join(envs) or 'none'})")
+        raise InputError(f"--env {env}: {ini} has no [env:{env}] (environments: {', '.join(envs) or 'none'})")
     platform = cp.get(sec, "platform", fallback=None) or cp.get("env", "platform", fallback=None)
     if not platform:
         raise UserError(f"{ini}: [env:{env}] names no platform")
@@ -204,12 +204,15 @@ def run_pio(cmd: list[str], project: Path, env: str, what: str, platform: str, v
 
 
 def run(args, upload: bool) -> int:
+    from rodgains.params import load_params
+
     what = "flash" if upload else "build"
     if not args.project_dir:
         paths.require_checkout(f"rodctl {what}")
-    pio = find_platformio()
+    load_params(args.params, args.overrides)  # the user's inputs first: a bad file is named, exit 2
     project = Path(args.project_dir) if args.project_dir else paths.REPO
     platform = env_platform(project, args.env)
+    pio = find_platformio()
     name = platform_name(platform)
     if not platform_installed(name) and not registry_reachable():
         raise UserError(f"PlatformIO could not install platform {name} (no internet?): it is not in "

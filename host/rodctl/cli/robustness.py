@@ -34,12 +34,13 @@ MAX_SECONDS = 600.0  # a run's simulated length, as `rodctl sim --duration`
 
 def check_score_args(args) -> None:
     from rodgains.errors import InputError
+    from rodgains.params import MAX_SAMPLES
 
     from rodctl.robust.score import case_set
 
     case_set(args.cases)
-    if args.samples is not None and args.samples < 0:
-        raise InputError(f"--samples {args.samples}: must be >= 0")
+    if args.samples is not None and not 0 <= args.samples <= MAX_SAMPLES:
+        raise InputError(f"--samples {args.samples}: must be between 0 and {MAX_SAMPLES:,}")
     if args.seed is not None and not 0 <= args.seed < 2**32:
         raise InputError(f"--seed {args.seed}: must be in 0 .. 2^32 - 1")
     if args.seconds is not None and not 0 < args.seconds <= MAX_SECONDS:

@@ -305,6 +305,10 @@ def check_scope_args(args) -> None:
 
         check_new(args.record, log_format(args.record, args.format), args.force)
         check_output(args.record, "--record", make_parent=True)
+    if getattr(args, "params", None) or getattr(args, "overrides", None):
+        from rodgains.params import load_params
+
+        load_params(args.params, args.overrides)  # a bad file is named now, not after the display and the board
 
 
 def _quit_window_loop(fig) -> None:

@@ -23,7 +23,10 @@ def run_sil_lib(args) -> int:
     if args.output:
         out = Path(args.output)
         if out.is_dir() or args.output.endswith(("/", "\\")):
-            out = out / lib.name
+            from rodctl.cli.outputs import check_output
+
+            out = out / lib.name  # named by the build: checked once it is known, before the copy
+            check_output(out, "--output", make_parent=True, force=args.force)
         try:
             out.parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(lib, out)
@@ -45,5 +48,5 @@ def register(sub) -> None:
     )
     add_param_args(p)
     p.add_argument("-o", "--output", metavar="PATH", help="also copy the library to PATH (a file or a folder)")
-    p.add_argument("--force", action="store_true", help="overwrite an existing --output file")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --output file (or the library's name in an --output folder)")
     p.set_defaults(func=run_sil_lib)

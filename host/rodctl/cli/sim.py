@@ -144,24 +144,23 @@ def run_one(args, name: str, params, all_mode: bool = False):
     finally:
         prog.done()
     wall = time.monotonic() - t0
+    logs = []  # (trace, path): a run of several traces writes a log for each, named by its label
+    if log is not None:
+        traces = o.traces
+        logs = [(traces[0], log)] if len(traces) == 1 else [
+            (tr, log.with_name(f"{log.stem}-{re.sub(r'[^A-Za-z0-9.]+', '-', tr.label).strip('-')}{log.suffix}"))
+            for tr in traces]
+        if len(traces) > 1 and args.log and not args.force:  # known once run; checked before anything is written
+            for _, path in logs:
+                check_new_log(path)
     written = []
     if plot is not None:
         from rodctl.sim.figures import save
 
         save(o, plot)
         written.append(str(plot))
-    if log is not None:
-        traces = o.traces
-        if len(traces) > 1 and args.log and not args.force:
-            for tr in traces:
-                tag = re.sub(r"[^A-Za-z0-9.]+", "-", tr.label).strip("-")
-                check_new_log(log.with_name(f"{log.stem}-{tag}{log.suffix}"))
-        if len(traces) == 1:
-            written += [str(f) for f in write_log(o, traces[0], log)]
-        else:
-            for tr in traces:
-                tag = re.sub(r"[^A-Za-z0-9.]+", "-", tr.label).strip("-")
-                written += [str(f) for f in write_log(o, tr, log.with_name(f"{log.stem}-{tag}{log.suffix}"))]
+    for tr, path in logs:
+        written += [str(f) for f in write_log(o, tr, path)]
     return o, wall, written
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from rodgains.errors import InputError
@@ -23,9 +24,28 @@ def _times(text: str | None) -> list[float] | None:
     if not text:
         return None
     try:
-        return [float(v) for v in text.split(",")]
+        times = [float(v) for v in text.split(",")]
     except ValueError:
-        raise InputError(f"--at {text!r}: times [s] on the log's clock, comma-separated") from None
+        times = []
+    if not times or not all(math.isfinite(v) for v in times):
+        raise InputError(f"--at {text!r}: times [s] on the log's clock, comma-separated")
+    return times
+
+
+def _panel_times(at: list[float] | None, t, ok) -> list[float]:
+    """The shape panels' times [s]: --at's, each inside the span the video tracked, else four across it."""
+    import numpy as np
+
+    if not ok.any():
+        raise InputError("--plot: no frame of the video was tracked, so there is no shape to draw")
+    first, last = float(t[ok][0]), float(t[ok][-1])
+    if at is None:
+        return list(np.linspace(first, last, 6)[1:-1])
+    outside = [v for v in at if not first <= v <= last]
+    if outside:
+        raise InputError(f"--at {','.join(f'{v:g}' for v in outside)}: outside the tracked span, "
+                         f"{first:.2f} to {last:.2f} s on the log's clock")
+    return at
 
 
 def run_track_command(args) -> int:
@@ -103,6 +123,8 @@ def run_track_command(args) -> int:
     for line in table_lines(r.errors):
         print("  " + line)
 
+    if args.plot:  # the panels' times checked before anything is written
+        times = _panel_times(at, r.time_s, np.isfinite(r.theta).all(axis=1))
     meta = {"video": args.video, "log": args.log, "fps": r.fps, "offset_s": a.offset_s, "drift_ppm": a.drift_ppm,
             "correlation": a.correlation, "m_per_px": r.m_per_px, "hub_px": f"{r.hub_px[0]:.2f},{r.hub_px[1]:.2f}",
             "quality": "0 every marker seen, 1 a marker filled in, 2 too few markers, 3 a repeated frame"}
@@ -115,10 +137,7 @@ def run_track_command(args) -> int:
         from rodctl.track.figures import tracking_figure
 
         length = float((params or load_params())["rod"]["length"])
-        t = r.time_s
-        ok = np.isfinite(r.theta).all(axis=1)
-        times = at or list(np.linspace(t[ok][0], t[ok][-1], 6)[1:-1])
-        fig = tracking_figure(t, r.theta, r.estimate, length, times,
+        fig = tracking_figure(r.time_s, r.theta, r.estimate, length, times,
                               f"{Path(args.video).name} against {Path(args.log).name}")
         fig.savefig(args.plot, dpi=110)
         written.append(args.plot)

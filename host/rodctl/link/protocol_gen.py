@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from rodgains.errors import InputError
+
 from rodctl.link.protocol_spec import Field, Spec, SpecError, load_spec
 
 COMMAND = "rodctl protocol"
@@ -291,9 +293,25 @@ def stale_files(root: Path) -> list[Path]:
     return [p for p, text in generated_files(root).items() if not p.exists() or p.read_bytes() != text.encode()]
 
 
+def _check_writable(p: Path) -> None:
+    """InputError (exit 2) when p is a folder or a file stands where one of its folders should be."""
+    if p.is_dir():
+        raise InputError(f"{p}: is a folder, where the generated file goes")
+    for folder in p.parents:
+        if folder.exists():
+            if not folder.is_dir():
+                raise InputError(f"{p}: {folder} is a file, not a folder")
+            return
+
+
 def write_files(root: Path) -> list[Path]:
+    """Every generated file, or none: each target is checked before the first is written."""
+    from rodgains.atomic_file import atomic_write
+
     files = generated_files(root)
+    for p in files:
+        _check_writable(p)
     for p, text in files.items():
         p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_bytes(text.encode())
+        atomic_write(p, text.encode())
     return list(files)

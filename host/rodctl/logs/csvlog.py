@@ -208,7 +208,9 @@ def read(path: Path, names: list[str] | None):
     meta["incomplete_rows"] = str(bad + int(cut))
     events = None
     ev = events_path(path)
-    if ev.exists():
+    if ev.exists() and not ev.is_file():
+        _warn(f"{ev}: not a file; reading the log without its events")
+    elif ev.exists():
         etypes = {c: (pa.int64() if d == "i8" else pa.string() if d.startswith("U") else pa.float64())
                   for c, d, _, _ in schema.EVENT_COLUMNS}
         if ev.stat().st_size:

@@ -134,6 +134,21 @@ def starting_point(params: Params, dims: tuple[Dim, ...]) -> dict:
     return out
 
 
+def check_journal(path: Path, study_dir: str) -> None:
+    """Every line of an existing journal is one JSON record; a line cut short (a process killed while writing)
+    is named, exit 2, before Optuna appends to the file."""
+    if not path.exists():
+        return
+    with path.open("rb") as f:
+        for number, line in enumerate(f, 1):
+            try:
+                json.loads(line)
+            except (UnicodeDecodeError, json.JSONDecodeError):
+                raise InputError(f"--study {study_dir}: {path.name} line {number} is not a whole record (cut short "
+                                 "when a run was killed?); delete that line to resume, or use a new --study "
+                                 "folder") from None
+
+
 def open_study(study_dir: str | None, meta: dict, sampler_seed: int):
     """A new or resumed Optuna study (journal file in study_dir, or in memory)."""
     import optuna
@@ -150,7 +165,13 @@ def open_study(study_dir: str | None, meta: dict, sampler_seed: int):
     folder.mkdir(parents=True, exist_ok=True)
     meta_path = folder / "study.json"
     if meta_path.exists():
-        old = json.loads(meta_path.read_text())
+        try:
+            old = json.loads(meta_path.read_text())
+        except (UnicodeDecodeError, json.JSONDecodeError):
+            old = None
+        if not isinstance(old, dict):
+            raise InputError(f"--study {study_dir}: {meta_path.name} is not this command's JSON; use a new --study "
+                             "folder")
         diff = [k for k in meta if old.get(k) != meta[k]]
         if diff:
             raise InputError(f"--study {study_dir}: made for other inputs ({', '.join(diff)} differ); "
@@ -159,6 +180,7 @@ def open_study(study_dir: str | None, meta: dict, sampler_seed: int):
         from rodctl.robust.output import write_json
 
         write_json(meta_path, meta)
+    check_journal(folder / "journal.log", study_dir)
     storage = JournalStorage(JournalFileBackend(str(folder / "journal.log")))
     return optuna.create_study(study_name=STUDY_NAME, direction="maximize", sampler=sampler, storage=storage,
                                load_if_exists=True)
