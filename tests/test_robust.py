@@ -91,6 +91,7 @@ def test_units_cover_every_case_of_the_set_for_both_tasks_and_the_draws():
     cases = sum(len(cases_for(t, CASE_SETS["quick"])) for t in ("balance", "swingup"))
     assert len(units) == cases + 3 * 2
     assert len({u.key for u in units}) == len(units)
+    assert S.unit_count(load_params(), "quick", samples=3) == len(units)  # what a sweep counts before it runs
 
 
 # ---- the pool, Dask, and dying workers ------------------------------------------------------------
@@ -222,6 +223,10 @@ def test_a_huge_grid_asks_for_yes(tmp_path, capsys):
     assert main(["sweep", "--grid", "rod.length=0.1:0.2:0.0001", "--grid", "lqr.q_angle=1:200:1",
                  "--out", str(out)]) == 2
     assert "--yes" in capsys.readouterr().err and not out.exists()
+    # Monte Carlo plants count: 2 points x (the matrix + 100,000 draws) x 2 tasks, counted, not made
+    assert main(["sweep", "--scenario", "score", "--samples", "100000", "--grid", "rod.length=0.15,0.16",
+                 "--out", str(out)]) == 2
+    assert "the grid is 400,156 runs" in capsys.readouterr().err and not out.exists()
 
 
 @pytest.mark.parametrize("argv", [

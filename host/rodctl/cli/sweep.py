@@ -44,7 +44,7 @@ def run_sweep(args) -> int:
     if plot:
         check_output(plot, "--plot", force=args.force, figure=True)
 
-    per_point = len(S.units(params, args.cases, args.samples, args.seed, args.seconds)) if args.scenario == "score" else 1
+    per_point = S.unit_count(params, args.cases, args.samples) if args.scenario == "score" else 1
     total = W.size(axes) * per_point
     if total > W.MAX_RUNS_WITHOUT_YES and not args.yes:
         raise InputError(f"the grid is {total:,} runs (> {W.MAX_RUNS_WITHOUT_YES:,}); pass --yes to run it")

@@ -70,6 +70,15 @@ def units(params: Params, cases: str = "matrix", samples: int | None = None, see
     return out
 
 
+def unit_count(params: Params, cases: str = "matrix", samples: int | None = None) -> int:
+    """len(units(params, cases, samples)), counted without making them (a sweep checks its size first)."""
+    from rodctl.sim.matrix import TASKS, cases_for
+
+    names = case_set(cases)
+    draws_n = params["uncertainty"]["samples"] if samples is None else samples
+    return sum(len(cases_for(task, names)) for task in TASKS) + draws_n * len(TASKS)
+
+
 def _plant(case) -> tuple:
     """What the row needs to say which plant ran: its overrides and extra delay."""
     return (("plant_overrides", tuple(case.plant_overrides)), ("delay_periods", case.delay_periods))
