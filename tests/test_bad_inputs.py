@@ -502,15 +502,15 @@ def test_a_killed_tune_s_cut_journal_line_is_named_and_left_as_it_was(tmp_path, 
     capsys.readouterr()
     assert main(argv) == 2
     n = whole.count(b"\n")
-    assert capsys.readouterr().err.splitlines()[-1] == (
+    assert capsys.readouterr().err == (
         f"rodctl: --study {study}: journal.log line {n} is not a whole record (cut short when a run was killed?); "
-        "delete that line to resume, or use a new --study folder")
+        "delete that line to resume, or use a new --study folder\n")
     assert journal.read_bytes() == cut and not (tmp_path / "t.toml").exists()
     journal.write_bytes(whole)
     (study / "study.json").write_text('{"cases": ')
     assert main(argv) == 2
-    assert capsys.readouterr().err.splitlines()[-1].startswith(
-        f"rodctl: --study {study}: study.json is not this command's JSON")
+    err = capsys.readouterr().err
+    assert err.startswith(f"rodctl: --study {study}: study.json is not this command's JSON") and err.count("\n") == 1
     assert journal.read_bytes() == whole
 
 

@@ -61,6 +61,8 @@ def run_tune(args) -> int:
     starts = [load_params(f) for f in args.start_from]
     meta = {"params_sha256": params.sha256(), "cases": args.cases, "samples": samples, "seed": seed,
             "seconds": args.seconds, "space": [d.text(params) for d in dims], "goals": args.goals}
+    if args.study:
+        T.check_study(args.study, meta)  # before the workers start: a study it cannot resume is one line
     runs = len(make_units(params))
     t0 = time.monotonic()
     with Runner(args.jobs, args.scheduler) as runner:

@@ -134,35 +134,13 @@ def starting_point(params: Params, dims: tuple[Dim, ...]) -> dict:
     return out
 
 
-def check_journal(path: Path, study_dir: str) -> None:
-    """Every line of an existing journal is one JSON record; a line cut short (a process killed while writing)
-    is named, exit 2, before Optuna appends to the file."""
-    if not path.exists():
-        return
-    with path.open("rb") as f:
-        for number, line in enumerate(f, 1):
-            try:
-                json.loads(line)
-            except (UnicodeDecodeError, json.JSONDecodeError):
-                raise InputError(f"--study {study_dir}: {path.name} line {number} is not a whole record (cut short "
-                                 "when a run was killed?); delete that line to resume, or use a new --study "
-                                 "folder") from None
-
-
-def open_study(study_dir: str | None, meta: dict, sampler_seed: int):
-    """A new or resumed Optuna study (journal file in study_dir, or in memory)."""
-    import optuna
-    from optuna.storages import JournalStorage
-    from optuna.storages.journal import JournalFileBackend
-
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
-    sampler = optuna.samplers.TPESampler(seed=sampler_seed, multivariate=True)
-    if study_dir is None:
-        return optuna.create_study(study_name=STUDY_NAME, direction="maximize", sampler=sampler)
+def check_study(study_dir: str, meta: dict) -> None:
+    """An existing --study folder can be resumed by this command: its study.json pins the same inputs and
+    every line of its journal is one JSON record (a line cut short by a kill is named before Optuna appends
+    to the file). InputError (exit 2) otherwise; a folder not made yet passes."""
     folder = Path(study_dir)
     if folder.exists() and not folder.is_dir():
         raise InputError(f"--study {study_dir}: not a folder")
-    folder.mkdir(parents=True, exist_ok=True)
     meta_path = folder / "study.json"
     if meta_path.exists():
         try:
@@ -175,12 +153,37 @@ def open_study(study_dir: str | None, meta: dict, sampler_seed: int):
         diff = [k for k in meta if old.get(k) != meta[k]]
         if diff:
             raise InputError(f"--study {study_dir}: made for other inputs ({', '.join(diff)} differ); "
-                           f"use a new --study folder")
-    else:
+                             f"use a new --study folder")
+    journal = folder / "journal.log"
+    if journal.exists():
+        with journal.open("rb") as f:
+            for number, line in enumerate(f, 1):
+                try:
+                    json.loads(line)
+                except (UnicodeDecodeError, json.JSONDecodeError):
+                    raise InputError(f"--study {study_dir}: {journal.name} line {number} is not a whole record "
+                                     "(cut short when a run was killed?); delete that line to resume, or use a "
+                                     "new --study folder") from None
+
+
+def open_study(study_dir: str | None, meta: dict, sampler_seed: int):
+    """A new or resumed Optuna study (journal file in study_dir, or in memory)."""
+    import optuna
+    from optuna.storages import JournalStorage
+    from optuna.storages.journal import JournalFileBackend
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    sampler = optuna.samplers.TPESampler(seed=sampler_seed, multivariate=True)
+    if study_dir is None:
+        return optuna.create_study(study_name=STUDY_NAME, direction="maximize", sampler=sampler)
+    check_study(study_dir, meta)
+    folder = Path(study_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    meta_path = folder / "study.json"
+    if not meta_path.exists():
         from rodctl.robust.output import write_json
 
         write_json(meta_path, meta)
-    check_journal(folder / "journal.log", study_dir)
     storage = JournalStorage(JournalFileBackend(str(folder / "journal.log")))
     return optuna.create_study(study_name=STUDY_NAME, direction="maximize", sampler=sampler, storage=storage,
                                load_if_exists=True)
