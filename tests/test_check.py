@@ -206,6 +206,8 @@ def test_ctrl_c_during_the_pulses_leaves_the_board_disarmed():
         st = run_rodctl("status", "--port", port, "--json", timeout=60)
         status = json.loads(st.stdout)
         assert (status["mode"], status["reason"]) == ("DISARMED", "HOST")  # disarmed by the host, not a timeout
+        # and it was the pulses the Ctrl-C stopped (a DISARM while disarmed also reads HOST)
+        assert until(lambda: "IDENTIFY -> DISARMED" in board_said(), timeout=30), board_said()
 
 
 def test_fix_stores_the_measured_signs_and_the_next_power_on_passes(tmp_path):
@@ -234,8 +236,8 @@ def test_unreadable_stored_settings_fall_back_to_the_compiled_defaults_and_say_s
     bad = tmp_path / "eeprom.bin"
     bad.write_bytes(b"RG\x01\xff\x01\x00\x12\x34")  # a record with a wrong CRC
     r = run_rodctl("status", "--port", f"sim://?eeprom={bad}", timeout=60)
-    assert ("wiring      encoder_sign +1, motor_sign +1, counts_per_rev 979.2 counts/turn (compiled defaults: the "
-            "stored settings were unreadable)") in r.stdout
+    assert ("wiring      encoder_sign +1, motor_sign +1, counts_per_rev 979.2 counts/turn (not stored on the "
+            "board: the stored settings were unreadable)") in r.stdout
 
 
 def test_another_encoder_is_set_and_kept_on_the_board_without_a_reflash(tmp_path):

@@ -232,6 +232,32 @@ def test_hello_flags_stored_only_while_the_settings_in_use_are_the_stored_ones(t
         assert not hello_after(dev, P.Set(P.Param.ENCODER_SIGN, 1.0)).rig & P.RigFlag.STORED
     finally:
         dev.close()
+    # a layout-1 record (signs only, 8 bytes) is the stored record: STORED, with the compiled counts
+    raw = bytearray(b"RG\x01\xff\x01\x00")
+    raw += P.crc16(bytes(raw)).to_bytes(2, "little")
+    eeprom.write_bytes(bytes(raw))
+    dev = VirtualDevice.from_options(eeprom=str(eeprom))
+    try:
+        dev.step()
+        dev.read()
+        hello = hello_after(dev)
+        assert hello.rig & P.RigFlag.STORED and hello.rig & P.RigFlag.ENCODER_REVERSED
+        assert (hello.counts_num, hello.counts_den) == (4896, 5)
+    finally:
+        dev.close()
+    # an unreadable record: the compiled defaults, STORE_CORRUPT until a SAVE_RIG replaces it
+    eeprom.write_bytes(bytes(raw[:6]) + b"\x00\x00")
+    dev = VirtualDevice.from_options(eeprom=str(eeprom))
+    try:
+        dev.step()
+        dev.read()
+        hello = hello_after(dev)
+        assert hello.rig & P.RigFlag.STORE_CORRUPT and not hello.rig & (P.RigFlag.STORED | P.RigFlag.ENCODER_REVERSED)
+        hello_after(dev, P.SaveRig())
+        hello = hello_after(dev)
+        assert hello.rig & P.RigFlag.STORED and not hello.rig & P.RigFlag.STORE_CORRUPT
+    finally:
+        dev.close()
 
 
 def test_a_counts_value_with_no_small_fraction_gets_the_closest_that_fits():

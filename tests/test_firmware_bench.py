@@ -10,8 +10,10 @@ pytestmark = pytest.mark.skipif(not bench_m4.ICOUNT.is_file(), reason="m4-icount
 
 
 def test_step_plus_telemetry_encode_meets_the_instruction_goals():
+    from rodctl.bench.suite import GOALS
+
     result = bench_m4.measure()
-    for key, goal in bench_m4.GOALS.items():
-        assert 0 < result[key] <= goal, (key, result[key])
+    for key in bench_m4.M4_GOAL_KEYS:
+        assert 0 < result[key] <= GOALS[key][0], (key, result[key])
     assert result["m4_step_instructions_n20"] > result["m4_step_instructions_n5"]
     assert result["m4_core_flash_bytes"] > 0 and result["m4_core_ram_bytes"] > 0

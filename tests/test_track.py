@@ -165,6 +165,7 @@ def test_a_video_without_the_markers_is_refused(filmed, tmp_path):
     (["VIDEO", "--log", "LOG", "--calibrate", "VIDEO", "--board", "2x2"], "--board '2x2': at least 3x3 inner corners"),
     (["VIDEO", "--log", "FOLDER"], "is a folder, not a file"),
     (["VIDEO", "--log", "LOG", "--at", "nan"], "--at 'nan': times [s] on the log's clock"),
+    (["VIDEO", "--log", "LOG", "--at", "1"], "--at 1: times of the figure's shape panels; add --plot PNG"),
     # known once the video is tracked: refused before the Parquet, the MCAP or the figure is written
     (["VIDEO", "--log", "LOG", "--plot", "PNG", "--at", "1,1e9"], "--at 1e+09: outside the tracked span"),
 ])

@@ -235,6 +235,7 @@ size_t rod_dev_take_save(uint8_t *out, size_t cap)
         return 0;
     }
     memcpy(out, bytes, ROD_RIG_STORE_SIZE);
+    rod_device_saved(&vdev, true); /* the host keeps them: the virtual board's EEPROM */
     return ROD_RIG_STORE_SIZE;
 }
 

@@ -91,7 +91,7 @@ ROD_SIL_API int rod_dev_status(float *est, int cap);
  * from its EEPROM at power-on. */
 ROD_SIL_API void rod_dev_load_rig(const uint8_t *stored, size_t n);
 /* After a SAVE_RIG: copies the 16 bytes the board would write to its EEPROM and returns 16, once;
- * otherwise 0. */
+ * otherwise 0. They count as written: HELLO flags STORED from the next step on. */
 ROD_SIL_API size_t rod_dev_take_save(uint8_t *out, size_t cap);
 /* Host -> device bytes; returns how many the emulated USB RX buffer (4096 bytes) took. */
 ROD_SIL_API size_t rod_dev_write(const uint8_t *data, size_t n);

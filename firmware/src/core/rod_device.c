@@ -20,6 +20,7 @@ void rod_device_init(rod_device_t *dev)
     dev->rig_corrupt = 0u;
     memset(dev->rig_kept, 0, sizeof dev->rig_kept);
     dev->save_wanted = false;
+    dev->save_writing = false;
 }
 
 void rod_device_load_rig(rod_device_t *dev, const uint8_t *stored, size_t n, rod_rig_t defaults)
@@ -34,14 +35,14 @@ void rod_device_load_rig(rod_device_t *dev, const uint8_t *stored, size_t n, rod
     }
 }
 
-/* STORED: the settings in use are the record in storage (a SET since then clears it), and the main
- * loop has taken any SAVE_RIG's record to write. */
+/* STORED: the settings in use are the record in storage (a SET since then clears it), and any
+ * SAVE_RIG's record has been written (rod_device_saved). */
 static uint8_t rig_flags(const rod_device_t *dev)
 {
     uint8_t now[ROD_RIG_STORE_SIZE];
     rod_rig_encode(&dev->control.settings.rig, now);
     uint8_t flags = (uint8_t)(rod_rig_sign_flags(&dev->control.settings.rig) | dev->rig_corrupt);
-    if (!dev->save_wanted && memcmp(now, dev->rig_kept, sizeof now) == 0) {
+    if (!dev->save_wanted && !dev->save_writing && memcmp(now, dev->rig_kept, sizeof now) == 0) {
         flags |= ROD_RIG_FLAG_STORED;
     }
     return flags;
@@ -52,6 +53,8 @@ bool rod_device_take_save(rod_device_t *dev, uint8_t out[ROD_RIG_STORE_SIZE])
     if (!dev->save_wanted) {
         return false;
     }
+    dev->save_writing = true; /* before save_wanted falls: HELLO never sees both clear mid-write */
+    __atomic_signal_fence(__ATOMIC_SEQ_CST);
     do { /* a SAVE_RIG during the copy rewrites the bytes and raises the flag again: copy again */
         dev->save_wanted = false;
         __atomic_signal_fence(__ATOMIC_SEQ_CST);
@@ -61,6 +64,13 @@ bool rod_device_take_save(rod_device_t *dev, uint8_t out[ROD_RIG_STORE_SIZE])
         __atomic_signal_fence(__ATOMIC_SEQ_CST);
     } while (dev->save_wanted);
     return true;
+}
+
+void rod_device_saved(rod_device_t *dev, bool ok)
+{
+    if (ok) {
+        dev->save_writing = false;
+    }
 }
 
 /* A numbered slot for the next frame; NULL (and one drop, one number used) when the ring is

@@ -41,6 +41,7 @@ typedef struct {
     uint8_t rig_corrupt; /* ROD_RIG_FLAG_STORE_CORRUPT until SAVE_RIG, when storage held an unreadable record */
     uint8_t rig_kept[ROD_RIG_STORE_SIZE]; /* step only: the record in storage (rod_rig_encode), all 0 when none */
     volatile bool save_wanted; /* SAVE_RIG arrived; the main loop stores save_bytes */
+    volatile bool save_writing; /* the main loop has taken save_bytes and not yet reported them written */
     uint8_t save_bytes[ROD_RIG_STORE_SIZE]; /* the rig settings as SAVE_RIG found them (rod_rig_encode) */
 } rod_device_t;
 
@@ -77,8 +78,13 @@ void rod_device_board_fault(rod_device_t *dev, uint8_t reason);
 void rod_device_load_rig(rod_device_t *dev, const uint8_t *stored, size_t n, rod_rig_t defaults);
 
 /* Main loop: after a SAVE_RIG, true once with the bytes to keep (ROD_RIG_STORE_SIZE) in out;
- * the board writes them to its storage (EEPROM), outside the control interrupt. */
+ * the board writes them to its storage (EEPROM), outside the control interrupt, then reports the
+ * write with rod_device_saved. */
 bool rod_device_take_save(rod_device_t *dev, uint8_t out[ROD_RIG_STORE_SIZE]);
+
+/* Main loop: the bytes rod_device_take_save gave were written (ok: they read back as written). HELLO
+ * flags STORED only from here; after a failed write it stays clear until a SAVE_RIG is written. */
+void rod_device_saved(rod_device_t *dev, bool ok);
 
 /* Main loop: count a valid host frame (keeps the heartbeat alive without sending one). */
 void rod_device_heartbeat(rod_device_t *dev);

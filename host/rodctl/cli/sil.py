@@ -12,20 +12,19 @@ from rodctl.cli.gains import add_param_args, params_from_args, regenerate_comman
 
 def run_sil_lib(args) -> int:
     from rodctl.build.sil_build import build_sil
+    from rodctl.cli.outputs import check_output, check_output_folder
 
     params = params_from_args(args)
-    if args.output and not (Path(args.output).is_dir() or args.output.endswith(("/", "\\"))):
-        from rodctl.cli.outputs import check_output
-
-        check_output(args.output, "--output", make_parent=True, force=args.force)  # before the build, not after it
+    into_folder = bool(args.output) and (Path(args.output).is_dir() or args.output.endswith(("/", "\\")))
+    if into_folder:  # before the build; the library's own name is known once built
+        check_output_folder(args.output, f"--output {args.output}")
+    elif args.output:
+        check_output(args.output, "--output", make_parent=True, force=args.force)
     args.header = None  # the regenerate line names the parameters, not a header path
     lib = build_sil(params, command=regenerate_command(args))
     if args.output:
-        out = Path(args.output)
-        if out.is_dir() or args.output.endswith(("/", "\\")):
-            from rodctl.cli.outputs import check_output
-
-            out = out / lib.name  # named by the build: checked once it is known, before the copy
+        out = Path(args.output) / lib.name if into_folder else Path(args.output)
+        if into_folder:
             check_output(out, "--output", make_parent=True, force=args.force)
         try:
             out.parent.mkdir(parents=True, exist_ok=True)

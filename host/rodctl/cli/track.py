@@ -66,6 +66,8 @@ def run_track_command(args) -> int:
     if args.markers is not None and not 2 <= args.markers <= 64:
         raise InputError(f"--markers {args.markers}: between 2 and 64 markers on the rod")
     at = _times(args.at)
+    if at is not None and not args.plot:
+        raise InputError(f"--at {args.at}: times of the figure's shape panels; add --plot PNG")
     out = Path(args.out)
     if out.suffix.lower() != ".parquet":
         raise InputError(f"--out {out}: the tracked log is Parquet (.parquet); its MCAP goes beside it")

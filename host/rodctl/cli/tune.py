@@ -63,7 +63,7 @@ def run_tune(args) -> int:
             "seconds": args.seconds, "space": [d.text(params) for d in dims], "goals": args.goals}
     if args.study:
         T.check_study(args.study, meta)  # before the workers start: a study it cannot resume is one line
-    runs = len(make_units(params))
+    runs = S.unit_count(params, args.cases, samples)
     t0 = time.monotonic()
     with Runner(args.jobs, args.scheduler) as runner:
         print(f"tune: {len(dims)} parameters, {runs} runs per trial (case set {args.cases!r} + Monte Carlo "

@@ -305,13 +305,24 @@ def _check_writable(p: Path) -> None:
 
 
 def write_files(root: Path) -> list[Path]:
-    """Every generated file, or none: each target is checked before the first is written."""
-    from rodgains.atomic_file import atomic_write
+    """Every generated file, or none: each is written beside its target first, and the targets are
+    replaced only once all of them were."""
+    import os
 
     files = generated_files(root)
     for p in files:
         _check_writable(p)
+    staged: list[tuple[Path, Path]] = []
     for p, text in files.items():
-        p.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write(p, text.encode())
+        tmp = p.with_name(f".{p.name}.partial")
+        try:
+            p.parent.mkdir(parents=True, exist_ok=True)
+            staged.append((tmp, p))
+            tmp.write_bytes(text.encode())
+        except OSError as e:
+            for t, _ in staged:
+                t.unlink(missing_ok=True)
+            raise InputError(f"cannot write {p}: {e.strerror}") from None
+    for tmp, p in staged:
+        os.replace(tmp, p)
     return list(files)

@@ -213,7 +213,7 @@ def rig_source(hello) -> str:
     """Whether the rig settings in use are the ones stored on the board (HELLO rig bits)."""
     rig = int(hello.rig)
     if rig & int(P.RigFlag.STORE_CORRUPT):
-        return "compiled defaults: the stored settings were unreadable"
+        return "not stored on the board: the stored settings were unreadable"
     if rig & int(P.RigFlag.STORED):
         return "stored on the board"
     return "not stored on the board"  # the compiled defaults, or a SET since power-on

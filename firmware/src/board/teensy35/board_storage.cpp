@@ -3,12 +3,20 @@
 
 #include "board_storage.h"
 
+#include <string.h>
+
 void board_storage_read(uint8_t *out, size_t n)
 {
     eeprom_read_block(out, (const void *)BOARD_RIG_EEPROM_ADDR, (uint32_t)n);
 }
 
-void board_storage_write(const uint8_t *data, size_t n)
+bool board_storage_write(const uint8_t *data, size_t n)
 {
     eeprom_write_block(data, (void *)BOARD_RIG_EEPROM_ADDR, (uint32_t)n);
+    uint8_t back[32];
+    if (n > sizeof back) {
+        return false;
+    }
+    board_storage_read(back, n);
+    return memcmp(back, data, n) == 0;
 }

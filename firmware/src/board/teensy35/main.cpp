@@ -177,7 +177,7 @@ static void service_storage()
 {
     uint8_t bytes[ROD_RIG_STORE_SIZE];
     if (rod_device_take_save(&device, bytes)) {
-        board_storage_write(bytes, sizeof bytes);
+        rod_device_saved(&device, board_storage_write(bytes, sizeof bytes));
     }
 }
 
