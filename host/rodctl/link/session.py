@@ -703,7 +703,7 @@ class Session:
         """SAVE_RIG: store the rig settings in use (signs, counts per turn) on the board for every
         power-on; returns the settings its HELLO reports afterwards (user units)."""
         self.command(P.SaveRig(), what="save-rig")
-        # the board takes the record to its EEPROM in its main loop, after the ACK: HELLO flags STORED then
+        # the board writes its EEPROM in its main loop, after the ACK: HELLO flags STORED once it reads back
         deadline = time.monotonic() + 2.0
         while not (hello := self.request_hello()).rig & P.RigFlag.STORED:
             if time.monotonic() > deadline:
