@@ -1,5 +1,6 @@
 """Encoder count to theta_1: exact wrap on 979.2 counts per turn (or the rig's own), multi-turn, and the base rate."""
 
+import contextlib
 import ctypes as C
 import math
 
@@ -207,57 +208,47 @@ def test_hello_flags_stored_only_while_the_settings_in_use_are_the_stored_ones(t
         assert [f.msg.result for f in frames if f.type == P.MsgType.ACK] == [P.AckResult.OK] * (len(msgs) + 1)
         return [f.msg for f in frames if f.type == P.MsgType.HELLO][-1]
 
+    @contextlib.contextmanager
+    def powered_on(eeprom):
+        dev = VirtualDevice.from_options(eeprom=str(eeprom))
+        try:
+            dev.step()
+            dev.read()
+            yield dev
+        finally:
+            dev.close()
+
     eeprom = tmp_path / "eeprom.bin"
-    dev = VirtualDevice.from_options(eeprom=str(eeprom))
-    try:
-        dev.step()
-        dev.read()
+    with powered_on(eeprom) as dev:
         assert not hello_after(dev).rig & P.RigFlag.STORED  # nothing stored: the compiled defaults
-        # STORED once the board's main loop has taken the record to write (after the step)
+        # STORED once the board's main loop has written the record (after the step)
         assert not hello_after(dev, P.Set(P.Param.ENCODER_SIGN, -1.0), P.SaveRig()).rig & P.RigFlag.STORED
         assert hello_after(dev).rig & P.RigFlag.STORED and len(dev.eeprom) == 16
         flipped = hello_after(dev, P.Set(P.Param.MOTOR_SIGN, -1.0))
         assert flipped.rig & P.RigFlag.MOTOR_REVERSED and not flipped.rig & P.RigFlag.STORED
         assert hello_after(dev, P.Set(P.Param.MOTOR_SIGN, 1.0)).rig & P.RigFlag.STORED
         assert not hello_after(dev, P.Set(P.Param.COUNTS_PER_REV, 1958.4)).rig & P.RigFlag.STORED
-    finally:
-        dev.close()
-    dev = VirtualDevice.from_options(eeprom=str(eeprom))  # power-on from the record
-    try:
-        dev.step()
-        dev.read()
+    with powered_on(eeprom) as dev:  # from the record
         hello = hello_after(dev)
         assert hello.rig & P.RigFlag.STORED and hello.rig & P.RigFlag.ENCODER_REVERSED
         assert (hello.counts_num, hello.counts_den) == (4896, 5)
         assert not hello_after(dev, P.Set(P.Param.ENCODER_SIGN, 1.0)).rig & P.RigFlag.STORED
-    finally:
-        dev.close()
     # a layout-1 record (signs only, 8 bytes) is the stored record: STORED, with the compiled counts
     raw = bytearray(b"RG\x01\xff\x01\x00")
     raw += P.crc16(bytes(raw)).to_bytes(2, "little")
     eeprom.write_bytes(bytes(raw))
-    dev = VirtualDevice.from_options(eeprom=str(eeprom))
-    try:
-        dev.step()
-        dev.read()
+    with powered_on(eeprom) as dev:
         hello = hello_after(dev)
         assert hello.rig & P.RigFlag.STORED and hello.rig & P.RigFlag.ENCODER_REVERSED
         assert (hello.counts_num, hello.counts_den) == (4896, 5)
-    finally:
-        dev.close()
     # an unreadable record: the compiled defaults, STORE_CORRUPT until a SAVE_RIG replaces it
     eeprom.write_bytes(bytes(raw[:6]) + b"\x00\x00")
-    dev = VirtualDevice.from_options(eeprom=str(eeprom))
-    try:
-        dev.step()
-        dev.read()
+    with powered_on(eeprom) as dev:
         hello = hello_after(dev)
         assert hello.rig & P.RigFlag.STORE_CORRUPT and not hello.rig & (P.RigFlag.STORED | P.RigFlag.ENCODER_REVERSED)
         hello_after(dev, P.SaveRig())
         hello = hello_after(dev)
         assert hello.rig & P.RigFlag.STORED and not hello.rig & P.RigFlag.STORE_CORRUPT
-    finally:
-        dev.close()
 
 
 def test_a_counts_value_with_no_small_fraction_gets_the_closest_that_fits():
