@@ -34,6 +34,10 @@ def run_protocol(args) -> int:
             return 1
         print(f"up to date: {', '.join(_shown(p, root) for p in gen.generated_files(root))}")
         return 0
+    from rodctl.cli.outputs import check_output
+
+    for p in gen.generated_files(root):  # every target, before the first is written
+        check_output(p, "cannot write", make_parent=True)
     written = gen.write_files(root)
     print(f"wrote {', '.join(_shown(p, root) for p in written)}")
     return 0

@@ -293,36 +293,19 @@ def stale_files(root: Path) -> list[Path]:
     return [p for p, text in generated_files(root).items() if not p.exists() or p.read_bytes() != text.encode()]
 
 
-def _check_writable(p: Path) -> None:
-    """InputError (exit 2) when p is a folder or a file stands where one of its folders should be."""
-    if p.is_dir():
-        raise InputError(f"{p}: is a folder, where the generated file goes")
-    for folder in p.parents:
-        if folder.exists():
-            if not folder.is_dir():
-                raise InputError(f"{p}: {folder} is a file, not a folder")
-            return
-
-
 def write_files(root: Path) -> list[Path]:
-    """Every generated file, or none: each is written beside its target first, and the targets are
-    replaced only once all of them were."""
-    import os
+    """Every generated file, or none: each is written beside its target (rodgains.atomic_file.replacing),
+    and the targets are replaced only once all of them were."""
+    from contextlib import ExitStack
+
+    from rodgains.atomic_file import replacing
 
     files = generated_files(root)
-    for p in files:
-        _check_writable(p)
-    staged: list[tuple[Path, Path]] = []
-    for p, text in files.items():
-        tmp = p.with_name(f".{p.name}.partial")
-        try:
-            p.parent.mkdir(parents=True, exist_ok=True)
-            staged.append((tmp, p))
-            tmp.write_bytes(text.encode())
-        except OSError as e:
-            for t, _ in staged:
-                t.unlink(missing_ok=True)
-            raise InputError(f"cannot write {p}: {e.strerror}") from None
-    for tmp, p in staged:
-        os.replace(tmp, p)
+    p = None
+    try:
+        with ExitStack() as stack:
+            for p, text in files.items():
+                stack.enter_context(replacing(p)).write_bytes(text.encode())
+    except OSError as e:
+        raise InputError(f"cannot write {p}: {e.strerror}") from None
     return list(files)
