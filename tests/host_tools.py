@@ -26,6 +26,22 @@ def rodctl_env(**extra) -> dict:
     return env
 
 
+def host_compiler() -> str:
+    """Full path of the host C compiler the SIL library is built with (rodctl.build.native: $CC, else gcc);
+    its absence fails the test: .ci/run installs it."""
+    import shutil
+
+    import pytest
+
+    from rodctl.build import native
+    from rodgains.errors import UserError
+
+    try:
+        return shutil.which(native.compiler())
+    except UserError as e:
+        pytest.fail(f"no host C compiler for the SIL build: {e}")
+
+
 def until(condition, timeout: float = 30.0) -> bool:
     """Poll `condition` until it holds or `timeout` [s] passes; its last value. A loaded machine runs the
     virtual board and the windows late, never differently: wait for what is checked, not a fixed time."""

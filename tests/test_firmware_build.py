@@ -9,7 +9,8 @@ import pytest
 
 from firmware_sil import header_path
 from rodctl import paths
-from rodctl.build import native, target_build
+from host_tools import host_compiler
+from rodctl.build import target_build
 from rodgains.errors import UserError
 
 WARN = ["-std=c11", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror"]
@@ -20,12 +21,8 @@ needs_arm = pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None, reason
 
 @pytest.fixture(scope="module")
 def host_cc() -> str:
-    """The compiler the SIL library is built with (rodctl.build.native: $CC, else gcc), resolved once: the
-    host checks here hold for that build, and every test of the module uses the same one."""
-    try:
-        return shutil.which(native.compiler())
-    except UserError as e:  # .ci/run installs it: its absence is a failure here, as in test_gains_design
-        pytest.fail(f"no host C compiler for the SIL build: {e}")
+    """The SIL build's compiler, resolved once: the host checks here hold for that build."""
+    return host_compiler()
 
 
 def compile_c(cc: str, source: Path, include: list[Path], extra=(), out: Path | None = None) -> subprocess.CompletedProcess:

@@ -9,8 +9,8 @@ import sys
 import numpy as np
 import pytest
 
+from host_tools import host_compiler
 from rodctl import paths
-from rodctl.build import native
 from rodgains import sampled
 from rodgains.design import design
 from rodgains.params import load_params
@@ -241,8 +241,8 @@ WARN = ["-std=c11", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror", "-c"]
 ])
 def test_header_compiles_warning_free_for_host_and_cortex_m4f(cc, target, edges, tmp_path):
     arm = cc.startswith("arm")
-    if cc == "host":  # the compiler the SIL library is built with ($CC, else gcc), as the header's host user
-        cc = native.compiler()
+    if cc == "host":  # the compiler the SIL library is built with, as the header's host user
+        cc = host_compiler()
     if shutil.which(cc) is None:
         pytest.fail(f"{cc} not installed (.ci/run installs it)")
     cc = shutil.which(cc)

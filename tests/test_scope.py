@@ -73,16 +73,14 @@ def test_scope_draws_a_balanced_rod_upright_in_a_real_window(xdisplay, tmp_path)
                         "--screenshot", str(shot))
     try:
         _wait_for_window(proc)
+
+        def screen() -> np.ndarray:
+            return np.asarray(ImageGrab.grab(xdisplay=xdisplay).convert("RGB")).astype(int)
+
         # the window redraws every 100 ms: grab it until a rod is drawn (a loaded machine draws it later)
-        deadline = time.monotonic() + 60
-        while True:
-            img = np.asarray(ImageGrab.grab(xdisplay=xdisplay).convert("RGB")).astype(int)
-            rows, cols = _red_rod(img)
-            if rows.size > 200 or time.monotonic() > deadline:
-                break
-            time.sleep(0.2)
+        until(lambda: _red_rod(screen())[0].size > 200, timeout=60)
         time.sleep(1.0)  # then a second more of balance on screen
-        img = np.asarray(ImageGrab.grab(xdisplay=xdisplay).convert("RGB")).astype(int)
+        img = screen()
     finally:
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=60)
