@@ -10,7 +10,7 @@ import stat
 import pytest
 
 from rodctl import cli, paths
-from rodctl.cli import flash as cmd_flash
+from rodctl.build import platformio
 
 
 @pytest.fixture
@@ -19,7 +19,7 @@ def no_pio(tmp_path, monkeypatch):
     empty = tmp_path / "bin-empty"
     empty.mkdir()
     monkeypatch.setenv("PATH", str(empty))
-    monkeypatch.setattr(cmd_flash, "module_available", lambda name: False)
+    monkeypatch.setattr(platformio, "module_available", lambda name: False)
     monkeypatch.setenv("PLATFORMIO_CORE_DIR", str(tmp_path / "pio-core"))
     monkeypatch.delenv("PLATFORMIO_PLATFORMS_DIR", raising=False)
 
@@ -34,7 +34,7 @@ def _fake_pio(tmp_path, monkeypatch, output: str = "", code: int = 0, platform_i
                    f"while IFS= read -r line; do echo \"$line\"; done < '{tmp_path}/pio-output.txt'\nexit {code}\n")
     pio.chmod(pio.stat().st_mode | stat.S_IXUSR)
     monkeypatch.setenv("PATH", str(bindir))
-    monkeypatch.setattr(cmd_flash, "module_available", lambda name: False)
+    monkeypatch.setattr(platformio, "module_available", lambda name: False)
     core = tmp_path / "pio-core"
     if platform_installed:
         (core / "platforms" / "teensy").mkdir(parents=True)
@@ -45,11 +45,11 @@ def _fake_pio(tmp_path, monkeypatch, output: str = "", code: int = 0, platform_i
 
 
 def _offline(monkeypatch):
-    monkeypatch.setattr(cmd_flash, "registry_reachable", lambda *a, **k: False)
+    monkeypatch.setattr(platformio, "registry_reachable", lambda *a, **k: False)
 
 
 def _online(monkeypatch):
-    monkeypatch.setattr(cmd_flash, "registry_reachable", lambda *a, **k: True)
+    monkeypatch.setattr(platformio, "registry_reachable", lambda *a, **k: True)
 
 
 def _project(tmp_path, ini: str = "[env:teensy35]\nplatform = teensy\n"):
@@ -135,8 +135,8 @@ def test_platformio_as_a_python_module_is_found(tmp_path, monkeypatch):
     empty = tmp_path / "bin-empty"
     empty.mkdir()
     monkeypatch.setenv("PATH", str(empty))
-    monkeypatch.setattr(cmd_flash, "module_available", lambda name: name == "platformio")
-    assert cmd_flash.find_platformio()[1:] == ["-m", "platformio"]
+    monkeypatch.setattr(platformio, "module_available", lambda name: name == "platformio")
+    assert platformio.find_platformio()[1:] == ["-m", "platformio"]
 
 
 def test_registry_probe_sees_a_closed_and_an_open_port(monkeypatch):
@@ -146,13 +146,13 @@ def test_registry_probe_sees_a_closed_and_an_open_port(monkeypatch):
         srv.bind(("127.0.0.1", 0))
         srv.listen(1)
         port = srv.getsockname()[1]
-        assert cmd_flash.registry_reachable(timeout=5, host="127.0.0.1", port=port)
+        assert platformio.registry_reachable(timeout=5, host="127.0.0.1", port=port)
     with socket.socket() as s:  # bound, not listening: connections are refused
         s.bind(("127.0.0.1", 0))
         closed = s.getsockname()[1]
-        assert not cmd_flash.registry_reachable(timeout=5, host="127.0.0.1", port=closed)
+        assert not platformio.registry_reachable(timeout=5, host="127.0.0.1", port=closed)
     monkeypatch.setenv("HTTPS_PROXY", "http://proxy.invalid:3128")  # behind a proxy we cannot tell: assume yes
-    assert cmd_flash.registry_reachable(timeout=5, host="127.0.0.1", port=closed)
+    assert platformio.registry_reachable(timeout=5, host="127.0.0.1", port=closed)
 
 
 def test_outside_a_clone_build_and_flash_name_what_they_need(monkeypatch, capsys):

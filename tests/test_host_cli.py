@@ -10,7 +10,7 @@ import pytest
 from host_tools import rodctl_env, run_rodctl
 from rodgains.params import load_params
 
-from rodctl.cli import flash as cmd_flash
+from rodctl.build import platformio
 from rodctl.link import ports
 from rodctl.link import protocol as P
 from rodctl.logs.plots import PANELS, make_figure, shape_nodes
@@ -76,15 +76,15 @@ def test_a_port_without_the_firmware_is_named_as_such():
 def test_platformio_output_is_summarized_in_one_line():
     out = ("Processing teensy35 (platform: teensy; board: teensy35; framework: arduino)\n" + "-" * 40 + "\n"
            "Platform Manager: Installing teensy\nHTTPClientError: \n")
-    assert cmd_flash.summarize_failure(out, "teensy") == "PlatformIO could not install platform teensy (no internet?)"
+    assert platformio.summarize_failure(out, "teensy") == "PlatformIO could not install platform teensy (no internet?)"
     out = "Compiling .pio/build/teensy35/src/core/rod_angle.c.o\nfirmware/src/core/x.c:3:1: error: expected ';'\n"
-    assert cmd_flash.summarize_failure(out, "teensy") == "firmware/src/core/x.c:3:1: error: expected ';'"
+    assert platformio.summarize_failure(out, "teensy") == "firmware/src/core/x.c:3:1: error: expected ';'"
 
 
 def test_platform_names_from_platformio_ini_specs():
-    assert cmd_flash.platform_name("teensy") == "teensy"
-    assert cmd_flash.platform_name("platformio/teensy@^5.0.0") == "teensy"
-    assert cmd_flash.platform_name("https://github.com/platformio/platform-teensy.git") == "teensy"
+    assert platformio.platform_name("teensy") == "teensy"
+    assert platformio.platform_name("platformio/teensy@^5.0.0") == "teensy"
+    assert platformio.platform_name("https://github.com/platformio/platform-teensy.git") == "teensy"
 
 
 # ---- plots --------------------------------------------------------------------------------------
