@@ -52,7 +52,8 @@ def test_sources_are_python_310():
 def wheel(tmp_path_factory):
     pytest.importorskip("setuptools")
     src = tmp_path_factory.mktemp("src")
-    ignore = shutil.ignore_patterns("__pycache__", "*.egg-info", "*.so", "*.o", ".pio", "build")
+    # not "build": that name is also the package rodctl.build, which the wheel must carry
+    ignore = shutil.ignore_patterns("__pycache__", "*.egg-info", "*.so", "*.o", ".pio")
     for name in SOURCES:
         p = ROOT / name
         if p.is_dir():
@@ -72,7 +73,8 @@ def test_wheel_carries_spec_sources_and_defaults_but_not_the_board(wheel):
     for must in ["rodctl/_firmware/protocol/rodlink.toml", "rodctl/_firmware/src/core/rod_control.c",
                  "rodctl/_firmware/src/core/rod_config.h", "rodctl/_firmware/src/core/rod_protocol_defs.h",
                  "rodctl/_firmware/sil/rod_sil.c", "rodctl/_firmware/include/rod_gains.toml",
-                 "rodctl/sim/native/rod_plant.c", "rodgains/default.toml"]:
+                 "rodctl/sim/native/rod_plant.c", "rodctl/build/sil_build.py", "rodctl/build/platformio.py",
+                 "rodgains/default.toml"]:
         assert must in names, must
     assert not any("board/teensy35" in n or n.endswith("platformio.ini") for n in names)
 
