@@ -170,9 +170,9 @@ def test_keys_and_buttons_arm_set_record_and_disarm(tmp_path):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from rodctl.cli.scope import Scope
     from rodctl.link.session import Session
     from rodctl.logs import read_log
+    from rodctl.scope.window import Scope
 
     out = tmp_path / "rec.csv"
     args = SimpleNamespace(port="sim://?theta0_deg=180", params=None, overrides=[], record=str(out), format=None,

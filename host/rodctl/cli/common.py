@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import datetime as _dt
 import signal
 import sys
 import threading
@@ -14,8 +13,8 @@ from pathlib import Path
 
 from rodgains.errors import InputError
 
-from rodctl.link import protocol as P
-from rodctl.link.session import Session, is_tty, name_of, parse_assignment, reason_text
+from rodctl.link import design, protocol as P
+from rodctl.link.session import Session, is_tty, mode_text
 from rodctl.logs.schema import from_upright_deg
 
 
@@ -36,27 +35,6 @@ def add_design_args(p: argparse.ArgumentParser, params_help: str | None = None) 
                         "its hash); with --port sim:// it also builds the virtual board's firmware and plant")
     p.add_argument("--set", metavar="SECTION.KEY=VALUE", action="append", default=[], dest="overrides",
                    help="override one parameter of --params (repeatable)")
-
-
-def design_params(session: Session, args=None):
-    """(Params, source) the firmware's gains came from, matched by the HELLO's header hash."""
-    from rodctl.logs.metadata import identify_params, shown
-
-    cands = []
-    if args is not None and (getattr(args, "params", None) or getattr(args, "overrides", None)):
-        from rodgains.params import load_params
-
-        label = args.params or "defaults"
-        if args.overrides:
-            label += " with " + " ".join(f"--set {o}" for o in args.overrides)
-        cands.append((load_params(args.params, args.overrides), label))
-    dev = getattr(session.ser, "device", None)  # sim://: the virtual board knows its parameters
-    if dev is not None and getattr(dev, "params", None) is not None:
-        from rodgains.params import DEFAULT_PARAMS
-
-        over = "".join(f" --set {o}" for o in getattr(dev, "overrides", ()))
-        cands.append((dev.params, f"{shown(dev.params_path or DEFAULT_PARAMS)}{over} (sim://)"))
-    return identify_params(bytes(session.hello.header_sha256).hex(), cands)
 
 
 class StatusLine:
@@ -120,15 +98,6 @@ def check_duration(seconds: float | None) -> None:
     if seconds is not None and not 0 < seconds <= MAX_WALL_DURATION_S:
         raise InputError(f"--duration {seconds:g}: must be in (0, {MAX_WALL_DURATION_S:g}] s; leave it out to run "
                          "until stopped")
-
-
-def mode_text(mode, reason) -> str:
-    m = name_of(P.Mode, mode)
-    if int(mode) == P.Mode.FAULT:
-        return f"{m} ({reason_text(reason)}: run clear-fault)"
-    if int(reason) != P.Reason.NONE:
-        return f"{m} (last: {reason_text(reason)})"
-    return m
 
 
 def status_text(s: Session, fps: float, rows: int | None = None) -> str:
@@ -197,20 +166,9 @@ def open_session(args) -> Session:
     return session_for(args)
 
 
-def default_log_name(fmt: str) -> str:
-    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    return f"rod-{stamp}.{fmt if fmt in ('parquet', 'mcap') else 'csv'}"
-
-
 def apply_settings(s: Session, assignments: list[str], args=None, out=print, kept: bool = False) -> None:
-    """SET every NAME=VALUE (all or none) and print what the board reports; `kept`: a SAVE_RIG follows, so the
-    rig settings are not said to last only until the board resets."""
-    parsed = [parse_assignment(a) for a in assignments]  # all names and numbers checked before anything is sent
-    params, _ = design_params(s, args)  # for the catch angle's range (the balance angle limit)
-    now = s.set_all(parsed, design_params=params)  # every value range-checked, then all applied or none
-    for setting, value in parsed:
-        lasts = "" if kept and setting.hello_field == "rig" else " (until the board resets)"
-        out(f"{setting.name} = {setting.format(now[setting.name])}{lasts}")
+    """SET every NAME=VALUE (all or none) and print what the board reports (rodctl.link.design.apply_settings)."""
+    design.apply_settings(s, assignments, args, out=out, kept=kept)
 
 
 def device_port(args) -> str | None:

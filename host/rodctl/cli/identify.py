@@ -226,9 +226,10 @@ def _settle(session, settle, limits, source: str, args, log_dir: Path) -> None:
 
 
 def _run_and_fit(args, exps, log_dir: Path, stamp: str) -> int:
-    from rodctl.cli.common import design_params, stop_signals
+    from rodctl.cli.common import stop_signals
     from rodctl.ident import experiments as E
     from rodctl.link import protocol as P
+    from rodctl.link.design import design_params
     from rodctl.link.session import Session, hello_counts_per_rev, reason_text
 
     logs = []

@@ -8,10 +8,11 @@ import time
 from rodgains.errors import UserError
 
 from rodctl.cli.common import (ARM_CHOICES, RateMeter, StatusLine, add_design_args, add_port_arg, check_duration,
-                               ctrl_c_watch, default_log_name, design_params, no_interrupts, session_for,
-                               status_text, stop_signals)
+                               ctrl_c_watch, no_interrupts, session_for, status_text, stop_signals)
 from rodctl.link import protocol as P
+from rodctl.link.design import design_params
 from rodctl.link.session import Session, name_of
+from rodctl.logs.writer import default_log_name
 
 
 def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> int:

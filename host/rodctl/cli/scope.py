@@ -12,23 +12,12 @@ board and end the session without a traceback.
 
 from __future__ import annotations
 
-import collections
 import shlex
 import signal
 import sys
 import threading
-import time
-from pathlib import Path
-
-import numpy as np
 
 from rodgains.errors import InputError, UserError
-
-from rodctl.link import protocol as P
-
-ROD_COLOR = "#ff0000"  # nothing else in the window is pure red: the Xvfb test finds the rod by it
-BALANCED_ZOOM_S = 1.0  # balanced this long: the angle panel zooms to upright [s]
-KEYS = {"s": "swing-up", "b": "balance", "d": "disarm", " ": "disarm", "c": "clear", "r": "record", "q": "quit"}
 
 
 def add_scope_args(p) -> None:
@@ -46,246 +35,6 @@ def add_scope_args(p) -> None:
                    help="when the scope ends (--duration, q, Ctrl-C), save the window as it last looked to this PNG "
                         "(its folder must exist)")
     add_design_args(p)
-
-
-class Scope:
-    """The window's state and actions; `action(name)` is what a key or button does."""
-
-    def __init__(self, session, fig, *, edge_length_m: float, window_s: float, args, title: str):
-        self.s = session
-        self.fig = fig
-        self.l = edge_length_m
-        self.window_s = window_s
-        self.args = args
-        self.writer = None
-        self.recorded: list[str] = []
-        self.message = "keys: s swing-up, b balance, d disarm, c clear fault, r record, q quit"
-        self.stop_requested = False
-        self.closed = False
-        h = session.hello
-        self.n = h.n
-        keep = int(window_s * 1e6 / (h.period_us * max(1, h.decimation))) + 10
-        self.buf: collections.deque = collections.deque(maxlen=keep)
-        self._buf_lock = threading.Lock()  # the reader thread appends while the window copies
-        self._frames_at = (time.monotonic(), session.frames)
-        self.fps = 0.0
-        session.add_listener(self._listen, replay=False)
-        self._build(title)
-
-    # --- data -------------------------------------------------------------------------------
-    def _listen(self, frame, _t) -> None:
-        if frame.type == P.MsgType.TELEMETRY:
-            m = frame.msg
-            with self._buf_lock:
-                self.buf.append((frame.time_us, m.theta_hat, m.torque, m.duty, int(m.mode), int(m.reason)))
-
-    def arrays(self):
-        """(t [s, 0 = newest], theta (rows, N) [rad], torque [N m], duty, mode) of the buffered frames."""
-        with self._buf_lock:
-            rows = list(self.buf)
-        if not rows:
-            return None
-        from rodctl.logs.schema import unwrap_us
-
-        t = unwrap_us([r[0] for r in rows])
-        t = t - t[-1]
-        th = np.array([r[1] for r in rows], dtype=float).reshape(len(rows), -1)
-        return (t, th, np.array([r[2] for r in rows]), np.array([r[3] for r in rows]),
-                np.array([r[4] for r in rows]))
-
-    # --- window -----------------------------------------------------------------------------
-    def _build(self, title: str) -> None:
-        from matplotlib.widgets import Button, TextBox
-
-        from rodctl.logs.plots import MODE_NAMES
-
-        fig = self.fig
-        gs = fig.add_gridspec(3, 2, width_ratios=(1, 1.6), left=0.07, right=0.98, top=0.9, bottom=0.17,
-                              hspace=0.35, wspace=0.2)
-        self.ax_sh = fig.add_subplot(gs[:, 0])
-        self.ax_th = fig.add_subplot(gs[0, 1])
-        self.ax_tq = fig.add_subplot(gs[1, 1], sharex=self.ax_th)
-        self.ax_mo = fig.add_subplot(gs[2, 1], sharex=self.ax_th)
-        L = self.l * self.n
-        self.ax_sh.set_xlim(-1.15 * L, 1.15 * L)
-        self.ax_sh.set_ylim(-1.15 * L, 1.15 * L)
-        self.ax_sh.set_aspect("equal")
-        self.ax_sh.grid(True, lw=0.3)
-        self.ax_sh.set_xlabel("x [m]")
-        self.ax_sh.set_ylabel("y [m]")
-        self.ax_sh.plot([0], [0], "ks", ms=7)
-        self.rod, = self.ax_sh.plot([], [], "-o", color=ROD_COLOR, lw=4, ms=5)
-        self.lines_th = [self.ax_th.plot([], [], lw=0.9, label=f"edge {i + 1}")[0] for i in range(self.n)]
-        self.ax_th.axhline(0, color="0.6", ls="--", lw=0.6)
-        self.ax_th.set_ylim(-185, 185)
-        self.ax_th.set_yticks(range(-180, 181, 90))
-        self.ax_th.set_ylabel("from upright [deg]")
-        if self.n <= 10:
-            self.ax_th.legend(fontsize=8, loc="upper left", ncol=min(5, self.n))
-        # torque and duty on axes of their own: a 30 mN m ripple must show beside a duty of 0.5
-        self.line_tq, = self.ax_tq.plot([], [], color="C1", lw=0.9, label="torque [mN m]")
-        self.ax_tq.set_ylabel("torque [mN m]", color="C1")
-        self.ax_du = self.ax_tq.twinx()
-        self.line_du, = self.ax_du.plot([], [], color="C4", lw=0.7, alpha=0.7, label="duty")
-        self.ax_du.set_ylim(-1.05, 1.05)
-        self.ax_du.set_ylabel("duty [-]", color="C4")
-        self.ax_tq.legend(handles=[self.line_tq, self.line_du], fontsize=9, loc="upper left")
-        self.line_mo, = self.ax_mo.step([], [], where="post", color="k")
-        self.ax_mo.set_yticks(range(len(MODE_NAMES)), MODE_NAMES, fontsize=7)
-        self.ax_mo.set_ylim(-0.5, len(MODE_NAMES) - 0.5)
-        self.ax_mo.set_xlabel("device time [s] (0 = now)")
-        for ax in (self.ax_th, self.ax_tq, self.ax_mo):
-            ax.set_xlim(-self.window_s, 0)
-            ax.grid(True, lw=0.3)
-        self.title = fig.suptitle(title, fontsize=9)
-        self.status = fig.text(0.07, 0.925, "", fontsize=9, family="monospace")
-        self.note = fig.text(0.07, 0.095, self.message, fontsize=8)
-        self.buttons = []
-        for i, (label, name) in enumerate((("swing-up (s)", "swing-up"), ("balance (b)", "balance"),
-                                           ("disarm (d)", "disarm"), ("clear fault (c)", "clear"),
-                                           ("record (r)", "record"))):
-            b = Button(fig.add_axes((0.07 + 0.105 * i, 0.02, 0.1, 0.05)), label)
-            b.on_clicked(lambda _e, name=name: self.action(name))
-            self.buttons.append(b)
-        self.setbox = TextBox(fig.add_axes((0.66, 0.02, 0.32, 0.05)), "set ", initial="")
-        self.setbox.on_submit(self._set_submitted)
-        # the scope owns its keys: matplotlib's own bindings (s save, c back, r home, q quit, ...) would
-        # open a dialog and arm the board when it is dismissed
-        handler = getattr(getattr(fig.canvas, "manager", None), "key_press_handler_id", None)
-        if handler is not None:
-            fig.canvas.mpl_disconnect(handler)
-        fig.canvas.mpl_connect("key_press_event", self._key)
-        fig.canvas.mpl_connect("close_event", lambda _e: setattr(self, "closed", True))
-
-    def _key(self, event) -> None:
-        if self.setbox.capturekeystrokes:  # typing into the set box
-            return
-        name = KEYS.get(event.key)
-        if name:
-            self.action(name)
-
-    def _set_submitted(self, text: str) -> None:
-        if text.strip():
-            self.action("set", text)
-            self.setbox.set_val("")
-
-    # --- actions ----------------------------------------------------------------------------
-    def action(self, name: str, text: str = "") -> None:
-        from rodctl.link.session import name_of
-
-        s = self.s
-        try:
-            # the mode at the ack goes stale at once (CATCH becomes BALANCE): the status line has the live one
-            if name in ("swing-up", "balance"):
-                mode = P.ArmMode.SWING_UP if name == "swing-up" else P.ArmMode.BALANCE
-                s.arm(mode)
-                self.message = f"armed {name}"
-            elif name == "disarm":
-                s.disarm()
-                self.message = "disarmed"
-            elif name == "clear":
-                ack = s.clear_fault()
-                self.message = f"fault cleared: {name_of(P.Mode, ack.mode)}"
-            elif name == "record":
-                self.toggle_recording()
-            elif name == "set":
-                from rodctl.cli.common import apply_settings
-
-                done: list[str] = []
-                apply_settings(s, text.split(), self.args, out=done.append)
-                self.message = "; ".join(done)
-            elif name == "quit":
-                self.stop_requested = True
-                self.message = "quit"
-        except UserError as e:
-            self.message = f"refused: {e}"
-        print(f"scope: {self.message}", file=sys.stderr, flush=True)
-
-    def toggle_recording(self) -> None:
-        from rodctl.cli.common import default_log_name, design_params
-        from rodctl.logs.metadata import device_metadata
-        from rodctl.logs.writer import LogWriter, log_format
-
-        if self.writer is not None:
-            w, self.writer = self.writer, None
-            self.s.remove_listener(w)
-            w.note("recording stopped (scope)")
-            w.close(self._trailer())
-            self.recorded.append(str(w.path))
-            self.message = f"recorded {w.path}: {w.rows} frames"
-            return
-        a = self.args
-        fmt = log_format(a.record or "x.csv", a.format) if a.record or a.format else "csv"
-        path = a.record if a.record and not self.recorded else default_log_name(fmt)
-        params, source = design_params(self.s, a)
-        meta = device_metadata(self.s.hello, port=self.s.port, params=params, params_source=source,
-                               start_unix=self.s.open_unix)
-        self.writer = LogWriter(path, meta, n=self.n, fmt=fmt, overwrite=bool(a.force))
-        self.s.add_listener(self.writer, replay=False)
-        self.writer.note("recording started (scope)")
-        self.message = f"recording to {path}"
-
-    def _trailer(self) -> dict:
-        c = self.s.counters()
-        return {"end": "scope", "frames": c["frames"], "seq_gaps": c["seq_gaps"], "crc_errors": c["crc_errors"]}
-
-    def finish(self) -> None:
-        if self.writer is not None:
-            self.toggle_recording()
-
-    # --- drawing ----------------------------------------------------------------------------
-    def update(self) -> None:
-        from rodctl.cli.common import mode_text
-        from rodctl.logs.plots import shape_nodes
-        from rodctl.logs.schema import from_upright
-
-        if self.stop_requested:
-            import matplotlib.pyplot as plt
-
-            plt.close(self.fig)
-            return
-        try:
-            self.s.check()
-        except UserError as e:
-            self.message = f"link lost: {e}"
-            self.stop_requested = True
-        if self.writer is not None:
-            self.writer.maybe_flush()
-        now = time.monotonic()
-        t0, f0 = self._frames_at
-        if now - t0 >= 1.0:
-            self.fps = (self.s.frames - f0) / (now - t0)
-            self._frames_at = (now, self.s.frames)
-        a = self.arrays()
-        if a is not None:
-            t, th, tq, du, mo = a
-            dev = np.degrees(from_upright(th))
-            for i, ln in enumerate(self.lines_th):
-                ln.set_data(t, dev[:, i])
-            self.line_tq.set_data(t, 1e3 * tq)
-            self.line_du.set_data(t, du)
-            shown = t >= -self.window_s
-            top = max(5.0, 1.15 * float(np.max(np.abs(1e3 * tq[shown])))) if shown.any() else 5.0
-            self.ax_tq.set_ylim(-top, top)
-            # balanced for the last second: the error is degrees, not half a turn, so zoom to upright
-            recent = t >= -BALANCED_ZOOM_S
-            if (mo[recent] == P.Mode.BALANCE).all():
-                span = max(2.0, 1.2 * float(np.max(np.abs(dev[recent]))))
-                self.ax_th.set_ylim(-span, span)
-                self.ax_th.set_yticks(np.linspace(-span, span, 5).round(1))
-            else:
-                self.ax_th.set_ylim(-185, 185)
-                self.ax_th.set_yticks(range(-180, 181, 90))
-            self.line_mo.set_data(t, mo)
-            x, y = shape_nodes(th[-1], self.l)
-            self.rod.set_data(x, y)
-            tlm = self.s.telemetry
-            mode = mode_text(tlm.mode, tlm.reason) if tlm is not None else "?"
-            rec = f"  REC {self.writer.path} ({self.writer.rows} frames)" if self.writer else ""
-            self.status.set_text(f"mode {mode} | theta1 {dev[-1, 0]:+7.1f} deg from upright, tip "
-                                 f"{dev[-1, -1]:+7.1f} deg | {self.fps:5.0f} frames/s{rec}")
-        self.note.set_text(self.message)
-        self.fig.canvas.draw_idle()
 
 
 def check_scope_args(args) -> None:
@@ -311,26 +60,10 @@ def check_scope_args(args) -> None:
         load_params(args.params, args.overrides)  # a bad file is named now, not after the display and the board
 
 
-def _quit_window_loop(fig) -> None:
-    """End the GUI's event loop even when closing the window failed (Tk: quit(); Qt: close())."""
-    win = getattr(getattr(fig.canvas, "manager", None), "window", None)
-    for name in ("quit", "close"):
-        f = getattr(win, name, None)
-        if callable(f):
-            try:
-                f()
-            except Exception:  # noqa: BLE001 - ending: the next try, then the session's disarm
-                continue
-            return
-
-
-END_GRACE_S = 3.0  # the window should be gone this long after the scope ends; else its loop is quit
-
-
 def run_scope(args) -> int:
     from rodctl.cli.plot import display_problem
 
-    from rodctl.cli.common import ctrl_c_watch, design_params, session_for
+    from rodctl.cli.common import ctrl_c_watch, session_for
 
     ctrl_c_seen = ctrl_c_watch()
     check_scope_args(args)
@@ -339,9 +72,7 @@ def run_scope(args) -> int:
         raise UserError(f"the scope needs a display: {why}. Record instead with "
                         f"`rodctl log --port {shlex.quote(args.port) if args.port else 'PORT'} --out run.csv`, then "
                         "`rodctl plot run.csv --out run.png`")
-    import matplotlib.pyplot as plt
-
-    from rodctl.logs.metadata import overrides_of
+    from rodctl.scope.loop import close_scope, open_scope, run_window, shot_saved
 
     stop = threading.Event()
     old = {}
@@ -350,89 +81,30 @@ def run_scope(args) -> int:
     def request_stop(signum, frame):
         stop.set()
 
+    def say(message: str) -> None:
+        print(f"scope: {message}", file=sys.stderr, flush=True)
+
     with session_for(args) as s:
         for sig in (signal.SIGINT, signal.SIGTERM):
             old[sig] = signal.signal(sig, request_stop)
         scope = None
         try:
-            params, source = design_params(s, args)
-            from rodgains.params import load_params
-
-            p = params or load_params()
-            over = " ".join(overrides_of(p))
-            h = s.hello
-            title = (f"{s.port}  firmware {h.fw_major}.{h.fw_minor}.{h.fw_patch}  N={h.n}  parameters "
-                     f"{source if params is not None else 'unknown (default rod drawn)'}"
-                     + (f"  overrides: {over}" if over else ""))
-            plt.rcParams["toolbar"] = "None"  # no save or zoom dialogs beside the board's controls
-            fig = plt.figure(figsize=(12, 7))
-            try:
-                fig.canvas.manager.set_window_title(f"rodctl scope {s.port}")
-            except AttributeError:
-                pass
-            scope = Scope(s, fig, edge_length_m=p["rod"]["length"] / h.n, window_s=args.window, args=args,
-                          title=title)
+            scope = open_scope(s, args, say=say)
             if args.record:
                 scope.toggle_recording()
             if ctrl_c_seen():  # a Ctrl-C that something swallowed: end, never arm
                 stop.set()
             if args.arm and not stop.is_set():
                 scope.action(args.arm)
-            t_end = None if args.duration is None else time.monotonic() + args.duration
-
-            shot = {"tried": False}
-            ending = {"since": None}
-
-            def tick():
-                # Nothing may escape: an exception in a GUI callback is printed and the loop goes on, with the
-                # heartbeat keeping the board armed. Any failure ends the scope (the session then disarms).
-                try:
-                    if stop.is_set() or (t_end is not None and time.monotonic() >= t_end):
-                        if ending["since"] is None:
-                            ending["since"] = time.monotonic()
-                        if args.screenshot and not shot["tried"]:  # before the window closes: what it showed last
-                            shot["tried"] = True  # once, saved or not
-                            try:
-                                fig.savefig(args.screenshot, dpi=100)
-                            except Exception as e:  # noqa: BLE001 - said after the disarm
-                                failures.append(UserError(f"--screenshot {args.screenshot}: not saved: "
-                                                          f"{getattr(e, 'strerror', None) or e}"))
-                        scope.stop_requested = True
-                    scope.update()
-                except Exception as e:  # noqa: BLE001 - said after the disarm
-                    failures.append(e)
-                    scope.stop_requested = True
-                    if ending["since"] is None:
-                        ending["since"] = time.monotonic()
-                    try:
-                        plt.close(fig)
-                    except Exception:  # noqa: BLE001
-                        pass
-                if ending["since"] is not None and time.monotonic() - ending["since"] > END_GRACE_S:
-                    _quit_window_loop(fig)
-
-            timer = fig.canvas.new_timer(interval=100)
-            timer.add_callback(tick)
-            timer.start()
-            print(f"scope: {s.port} (firmware {h.fw_major}.{h.fw_minor}.{h.fw_patch}, N={h.n}); keys: s swing-up, "
-                  "b balance, d disarm, c clear fault, r record, q quit; closing the window disarms",
-                  file=sys.stderr, flush=True)
-            try:
-                plt.show()
-            except KeyboardInterrupt:
-                pass
-            try:
-                timer.stop()
-            except Exception:  # noqa: BLE001 - the window is gone
-                pass
+            h = s.hello
+            run_window(scope, stop, duration_s=args.duration, screenshot=args.screenshot, failures=failures,
+                       ready=lambda: say(f"{s.port} (firmware {h.fw_major}.{h.fw_minor}.{h.fw_patch}, N={h.n}); keys: "
+                                         "s swing-up, b balance, d disarm, c clear fault, r record, q quit; closing the "
+                                         "window disarms"))
         finally:
             for sig, hnd in old.items():
                 signal.signal(sig, hnd)
-            for end in ((scope.finish,) if scope is not None else ()) + (lambda: plt.close("all"),):
-                try:
-                    end()
-                except Exception as e:  # noqa: BLE001 - the session below still disarms; said after it
-                    failures.append(e)
+            close_scope(scope, failures)
     rec = f"; recorded {', '.join(scope.recorded)}" if scope is not None and scope.recorded else ""
     if getattr(args, "screenshot", None) and shot_saved(args.screenshot, failures):
         rec += f"; screenshot {args.screenshot}"
@@ -441,10 +113,6 @@ def run_scope(args) -> int:
     if failures:
         raise failures[0]
     return 0
-
-
-def shot_saved(path: str, failures: list) -> bool:
-    return Path(path).is_file() and not any(str(f).startswith("--screenshot ") for f in failures)
 
 
 def register(sub) -> None:

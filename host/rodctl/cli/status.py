@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import json
 
-from rodctl.cli.common import add_design_args, add_port_arg, apply_settings, design_params, session_for, stop_signals
+from rodctl.cli.common import add_design_args, add_port_arg, apply_settings, session_for, stop_signals
 from rodctl.link import protocol as P
+from rodctl.link.design import design_params
 from rodctl.link.session import SETTINGS, Session, hello_settings, name_of, parse_assignment, reason_text, rig_source
 from rodctl.logs.schema import from_upright_deg
 

@@ -71,6 +71,15 @@ def reason_text(reason) -> str:
         return f"reason {int(reason)}"
 
 
+def mode_text(mode, reason) -> str:
+    m = name_of(P.Mode, mode)
+    if int(mode) == P.Mode.FAULT:
+        return f"{m} ({reason_text(reason)}: run clear-fault)"
+    if int(reason) != P.Reason.NONE:
+        return f"{m} (last: {reason_text(reason)})"
+    return m
+
+
 # ---- run-time settings (SET) -------------------------------------------------------------------
 
 class Setting:

@@ -11,6 +11,7 @@ replaced unless overwrite=True (`--force`).
 
 from __future__ import annotations
 
+import datetime as _dt
 import threading
 import time
 from pathlib import Path
@@ -44,6 +45,11 @@ def log_format(path: str | Path, fmt: str | None = None) -> str:
     if fmt and EXTENSIONS[ext] != fmt:
         raise InputError(f"{path}: --format {fmt} but the name says {EXTENSIONS[ext]}; name it .{fmt} or drop --format")
     return EXTENSIONS[ext]
+
+
+def default_log_name(fmt: str) -> str:
+    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    return f"rod-{stamp}.{fmt if fmt in ('parquet', 'mcap') else 'csv'}"
 
 
 def require_format(fmt: str) -> None:

@@ -1,0 +1,44 @@
+"""The design a board runs: which parameter file its firmware's gains came from, and SETs checked against it.
+
+    params, source = design_params(session, args)   # (None, "unknown") when no candidate matches
+    apply_settings(session, ["swing_amplitude=0.03"], args, out=say)
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+from rodctl.link.session import Session, parse_assignment
+
+
+def design_params(session: Session, args=None):
+    """(Params, source) the firmware's gains came from, matched by the HELLO's header hash."""
+    from rodctl.logs.metadata import identify_params, shown
+
+    cands = []
+    if args is not None and (getattr(args, "params", None) or getattr(args, "overrides", None)):
+        from rodgains.params import load_params
+
+        label = args.params or "defaults"
+        if args.overrides:
+            label += " with " + " ".join(f"--set {o}" for o in args.overrides)
+        cands.append((load_params(args.params, args.overrides), label))
+    dev = getattr(session.ser, "device", None)  # sim://: the virtual board knows its parameters
+    if dev is not None and getattr(dev, "params", None) is not None:
+        from rodgains.params import DEFAULT_PARAMS
+
+        over = "".join(f" --set {o}" for o in getattr(dev, "overrides", ()))
+        cands.append((dev.params, f"{shown(dev.params_path or DEFAULT_PARAMS)}{over} (sim://)"))
+    return identify_params(bytes(session.hello.header_sha256).hex(), cands)
+
+
+def apply_settings(s: Session, assignments: list[str], args=None, *, out: Callable[[str], None],
+                   kept: bool = False) -> None:
+    """SET every NAME=VALUE (all or none) and say to `out` what the board reports; `kept`: a SAVE_RIG follows,
+    so the rig settings are not said to last only until the board resets."""
+    parsed = [parse_assignment(a) for a in assignments]  # all names and numbers checked before anything is sent
+    params, _ = design_params(s, args)  # for the catch angle's range (the balance angle limit)
+    now = s.set_all(parsed, design_params=params)  # every value range-checked, then all applied or none
+    for setting, value in parsed:
+        lasts = "" if kept and setting.hello_field == "rig" else " (until the board resets)"
+        out(f"{setting.name} = {setting.format(now[setting.name])}{lasts}")
