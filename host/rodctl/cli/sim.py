@@ -2,20 +2,14 @@
 
 from __future__ import annotations
 
-import re
 import sys
 import time
 from pathlib import Path
-
-import numpy as np
 
 from rodgains.errors import InputError
 
 from rodctl.cli.gains import add_param_args, params_from_args
 from rodctl.cli.outputs import check_name, check_output, make_folder
-
-TABLE_BEGIN = "<!-- BEGIN scenario table: regenerate with `rodctl sim --all --figures docs/img --table docs/scenarios.md` -->"
-TABLE_END = "<!-- END scenario table -->"
 
 
 class Progress:
@@ -41,53 +35,6 @@ class Progress:
         if self.tty:
             sys.stderr.write("\r" + " " * 70 + "\r")
             sys.stderr.flush()
-
-
-def truth_name(log: Path) -> Path:
-    """The simulator's true angles beside a log: LOG.truth.csv."""
-    return log.with_name(log.stem + ".truth.csv")
-
-
-def check_new_log(log: Path) -> None:
-    """InputError when writing the log `log` would replace a file: the log's own files or its truth file."""
-    from rodctl.logs.writer import check_new
-
-    check_new(log, also=(truth_name(log),))
-
-
-def write_log(o, trace, path: Path) -> tuple[Path, Path]:
-    """The trace in the device log format (rodctl.logs.LogWriter), plus the true state beside it."""
-    from rodctl import logs as logfile
-    from rodctl.link import protocol as P
-
-    p = o.params
-    firmware = trace.est is not None
-    n = trace.est.shape[1] // 2 if firmware else trace.theta.shape[1]
-    meta = logfile.simulator_metadata(p, n=n, source=f"simulator: rodctl sim --scenario {o.name} ({trace.label}"
-                                      + ("" if firmware else "; state feedback, theta_hat is the true state") + ")")
-    period_us = int(round(p.dt * 1e6))
-    w = logfile.LogWriter(path, meta, n=n, overwrite=True)  # run_one has checked --log against --force
-    try:
-        est = trace.est if firmware else np.hstack([trace.theta, np.zeros_like(trace.theta)])
-        mode = trace.mode if trace.mode is not None else np.full(len(trace.t), 1)
-        duty = trace.duty if trace.duty is not None else np.zeros(len(trace.t))
-        count = trace.count if trace.count is not None else np.zeros(len(trace.t), int)
-        for k in range(len(trace.t)):
-            m = int(mode[k])
-            reason = trace.reason if m == 3 else 0
-            enabled = m in (1, 2)
-            msg = P.Telemetry(m, reason, (1 if enabled else 0) | 4, n, int(count[k]), float(est[k, n]),
-                              float(trace.torque[k]), float(duty[k]), 0, 0, 0, 0,
-                              tuple(est[k, :n].tolist()), tuple(est[k, n:].tolist()))
-            w.write_telemetry(msg, seq=k, time_us=(k * period_us) & 0xFFFFFFFF, host_time_s=float(trace.t[k]))
-    finally:
-        w.close()
-    truth = truth_name(path)
-    N = trace.theta.shape[1]
-    header = "time_s," + ",".join(f"theta_{i + 1}_rad" for i in range(N))
-    np.savetxt(truth, np.column_stack([trace.t, trace.theta]), delimiter=",", header=header, comments="",
-               fmt="%.9g")
-    return path, truth
 
 
 def summary_lines(o) -> list[str]:
@@ -118,9 +65,8 @@ def _outputs(args, name: str, all_mode: bool) -> tuple[Path | None, Path | None]
 
 
 def run_one(args, name: str, params, all_mode: bool = False):
-    from rodctl.sim.scenarios import Options, SCENARIOS
+    from rodctl.sim.scenario_run import check_new_log, run_one as run_scenario
 
-    scen = SCENARIOS[name]
     plot, log = _outputs(args, name, all_mode)
     for path, flag, figure in ((plot, "--figures" if all_mode else "--plot", True), (log, "--log", False)):
         if path is not None:  # before the run: the name, then the folder (made and checked writable)
@@ -133,67 +79,20 @@ def run_one(args, name: str, params, all_mode: bool = False):
                 except InputError as e:
                     raise InputError(f"{flag} {e}") from None
             make_folder(path.parent, f"{flag} {path}")
-    if log is not None and args.log and not args.force:  # an explicit --log is never replaced silently
+    keep_log = bool(args.log) and not args.force  # an explicit --log is never replaced silently
+    if log is not None and keep_log:
         check_new_log(log)
     if plot is not None and not all_mode and args.plot and not args.force and plot.exists():  # nor an explicit --plot
         raise InputError(f"--plot {plot} exists: choose another file name, or --force to replace it")
     prog = Progress(name)
-    t0 = time.monotonic()
-    try:
-        o = scen.run(Options(params, progress=prog, duration=args.duration))
-    finally:
-        prog.done()
-    wall = time.monotonic() - t0
-    logs = []  # (trace, path): a run of several traces writes a log for each, named by its label
-    if log is not None:
-        traces = o.traces
-        logs = [(traces[0], log)] if len(traces) == 1 else [
-            (tr, log.with_name(f"{log.stem}-{re.sub(r'[^A-Za-z0-9.]+', '-', tr.label).strip('-')}{log.suffix}"))
-            for tr in traces]
-        if len(traces) > 1 and args.log and not args.force:  # known once run; checked before anything is written
-            for _, path in logs:
-                check_new_log(path)
-    written = []
-    if plot is not None:
-        from rodctl.sim.figures import save
-
-        save(o, plot)
-        written.append(str(plot))
-    for tr, path in logs:
-        written += [str(f) for f in write_log(o, tr, path)]
-    return o, wall, written
-
-
-def table_markdown(outcomes) -> str:
-    from rodctl.sim.figures import fmt
-    from rodctl.sim.scenarios import SCENARIOS
-
-    rows = ["| scenario | paper | run | plant | settle to 1 deg [s] | overshoot [deg] | peak torque [N m] | "
-            "swing-up [s] | estimate error RMS [deg] | final [deg] | result |",
-            "|---|---|---|---|---|---|---|---|---|---|---|"]
-    for o in outcomes:
-        s = SCENARIOS[o.name]
-        if s.expect_pass is None:
-            verdict = "pass" if o.passed else "fail (near the band: docs/control.md)"
-        elif o.passed == s.expect_pass:
-            verdict = "pass" if o.passed else "**fail** (documented below)"
-        else:
-            verdict = ("pass" if o.passed else "**fail**") + " (unexpected)"
-        plants = {tr.label: (tr.plant or "paper's model") for tr in o.traces}
-        for i, (label, m) in enumerate(o.metrics.items()):
-            rows.append(f"| {o.name if i == 0 else ''} | {s.paper if i == 0 else ''} | {label} | {plants.get(label, '')} | "
-                        f"{fmt(m['settle_s'])} | "
-                        f"{fmt(m['overshoot_deg'], 1)} | {fmt(m['peak_torque_Nm'], 3)} | {fmt(m['swingup_s'])} | "
-                        f"{fmt(m['est_rms_deg'])} | {fmt(m['final_dev_deg'])} | {verdict if i == 0 else ''} |")
-    groups: dict[str, list[str]] = {}  # one line per distinct criterion (27 robust-* share one)
-    for o in outcomes:
-        groups.setdefault(o.criterion, []).append(f"`{o.name}`")
-    crit = "\n".join(f"- {', '.join(names)}: {c}." for c, names in groups.items())
-    return "\n".join(rows) + "\n\nPass criteria:\n\n" + crit + "\n"
+    return run_scenario(name, params, plot=plot, log=log, keep_log=keep_log, duration=args.duration,
+                        progress=prog, finished=prog.done)
 
 
 def check_table_page(readme: Path) -> None:
     """InputError unless `readme` exists, holds the scenario-table markers, and can be rewritten."""
+    from rodctl.sim.scenario_table import TABLE_BEGIN, TABLE_END
+
     check_output(readme, "--table")
     try:
         text = readme.read_text()
@@ -205,19 +104,8 @@ def check_table_page(readme: Path) -> None:
         raise InputError(f"{readme}: no scenario-table markers ({TABLE_BEGIN!r} ... {TABLE_END!r}) to replace")
 
 
-def replace_table(readme: Path, table: str) -> None:
-    text = readme.read_text() if readme.exists() else ""
-    block = f"{TABLE_BEGIN}\n{table}{TABLE_END}"
-    if TABLE_BEGIN in text and TABLE_END in text:
-        start = text.index(TABLE_BEGIN)
-        end = text.index(TABLE_END) + len(TABLE_END)
-        text = text[:start] + block + text[end:]
-    else:
-        raise InputError(f"{readme}: no scenario-table markers ({TABLE_BEGIN!r} ... {TABLE_END!r}) to replace")
-    readme.write_text(text)
-
-
 def run_sim(args) -> int:
+    from rodctl.sim.scenario_table import replace_table, table_markdown
     from rodctl.sim.scenarios import DEFAULT, SCENARIOS
 
     if args.list:

@@ -3,35 +3,23 @@
 from __future__ import annotations
 
 import sys
-import time
-from dataclasses import replace
 from pathlib import Path
-
-from rodgains.errors import ParamError
 
 from rodctl.cli.gains import _shown_path, add_param_args, params_from_args
 from rodctl.cli.outputs import check_output
 from rodctl.cli.robustness import add_exec_args, add_score_args, check_score_args, command_line
 
-SCENARIOS = ("balance", "swingup", "score")
-
-
-def _point_info(point: dict, index: int) -> tuple:
-    return (("point", index),) + tuple(point.items())
-
 
 def run_sweep(args) -> int:
     from rodgains.errors import InputError
 
-    from rodctl.robust import figures, score as S, sweep as W
-    from rodctl.robust.execute import Runner, Unit
-    from rodctl.robust.output import write_parquet
+    from rodctl.robust import sweep as W
     from rodctl.sim.matrix import CASES
 
     params = params_from_args(args)
     axes = W.parse_grid(args.grid)
-    if args.scenario not in SCENARIOS:
-        raise InputError(f"--scenario {args.scenario}: one of {', '.join(SCENARIOS)}")
+    if args.scenario not in W.SCENARIOS:
+        raise InputError(f"--scenario {args.scenario}: one of {', '.join(W.SCENARIOS)}")
     if args.case not in CASES:
         raise InputError(f"--case {args.case}: unknown case; one of {', '.join(CASES)}")
     if args.scenario != "score" and args.scenario not in CASES[args.case].tasks:
@@ -44,80 +32,27 @@ def run_sweep(args) -> int:
     if plot:
         check_output(plot, "--plot", force=args.force, figure=True)
 
-    per_point = S.unit_count(params, args.cases, args.samples) if args.scenario == "score" else 1
-    total = W.size(axes) * per_point
+    total = W.run_count(params, axes, args.scenario, args.cases, args.samples)
     if total > W.MAX_RUNS_WITHOUT_YES and not args.yes:
         raise InputError(f"the grid is {total:,} runs (> {W.MAX_RUNS_WITHOUT_YES:,}); pass --yes to run it")
 
-    case = CASES[args.case]
-    if args.criterion == "robust":
-        case = replace(case, strict=False)
-    units, rows_refused = [], []
-    for i, point in enumerate(W.points(axes)):
-        info = _point_info(point, i)
-        try:
-            p = W.apply(params, point)
-        except ParamError as e:
-            rows_refused.append({**dict(info), "case": args.case if args.scenario != "score" else "score",
-                                 "task": args.scenario, "passed": False, "refused": True,
-                                 "reason": f"invalid parameters: {e}"})
-            continue
-        if args.scenario == "score":
-            units += S.units(p, args.cases, args.samples, args.seed, args.seconds, info=info)
-        else:
-            units.append(Unit(p.canonical_json(), case, args.scenario, args.seconds, info))
-    t0 = time.monotonic()
-    with Runner(args.jobs, args.scheduler) as runner:
-        print(f"sweep: {W.size(axes)} grid points, {len(units)} runs on the {runner.where}", file=sys.stderr)
-        rows = runner.run(units, desc="sweep")
-    wall = time.monotonic() - t0
-    rows = sorted(rows + rows_refused, key=lambda r: r["point"])
-    names = [a.name for a in axes]
-
-    # one verdict per grid point: the run itself, or the score over the point's runs
-    per_point_rows = []
-    for i in sorted({r["point"] for r in rows}):
-        sub = [r for r in rows if r["point"] == i]
-        head = {k: sub[0][k] for k in names}
-        if args.scenario == "score":
-            refused = all(r.get("refused") for r in sub)
-            sc = S.score(sub, W.apply(params, head)) if not refused else None
-            per_point_rows.append({**head, "refused": refused, "reason": sub[0].get("reason", "") if refused else "",
-                                   "passed": bool(sc and sc.passed == sc.runs),
-                                   "score": sc.score if sc else 0.0, "settle_s": None})
-        else:
-            per_point_rows.append(sub[0])
-
-    meta = {"command": command_line(sys.argv[1:]), "grid": {a.name: list(a.values) for a in axes},
-            "scenario": args.scenario, "case": args.case, "params_sha256": params.sha256(),
-            "params_source": params.source, "parameters": params.values, "wall_s": round(wall, 1)}
-    write_parquet(args.out, rows, meta)
-    n_ok = sum(1 for r in per_point_rows if r.get("passed"))
-    n_ref = sum(1 for r in per_point_rows if r.get("refused"))
-    print(f"{len(per_point_rows)} grid points: {n_ok} pass, {len(per_point_rows) - n_ok - n_ref} fail, "
-          f"{n_ref} refused  [{wall:.1f} s]")
-    if len(axes) == 2 and not isinstance(axes[0].values[0], str):
-        from rodgains.buckling import greenhill_length
-
-        crit = greenhill_length(params) if names[0] == "rod.length" else None
-        for yv, xv in W.frontier(per_point_rows, names[0], names[1]).items():
-            ratio = f" = {xv / crit:.3f} x the continuum critical length" if crit and xv is not None else ""
-            print(f"  {names[1]} = {yv}: largest {names[0]} passing from the smallest up: "
-                  f"{'none' if xv is None else xv}{ratio}")
+    sweep = W.run(params, axes, args.scenario, args.case, args.criterion, args.cases, args.samples, args.seed,
+                  args.seconds, jobs=args.jobs, scheduler=args.scheduler, say=lambda line: print(line, file=sys.stderr))
+    W.write_parquet(sweep, args.out, command_line(sys.argv[1:]))
+    n_points, n_ok, n_ref = len(sweep.points), sweep.passed, sweep.refused
+    print(f"{n_points} grid points: {n_ok} pass, {n_points - n_ok - n_ref} fail, "
+          f"{n_ref} refused  [{sweep.wall_s:.1f} s]")
+    names, crit = sweep.names, sweep.critical_length_m
+    for yv, xv in (sweep.frontier() or {}).items():
+        ratio = f" = {xv / crit:.3f} x the continuum critical length" if crit and xv is not None else ""
+        print(f"  {names[1]} = {yv}: largest {names[0]} passing from the smallest up: "
+              f"{'none' if xv is None else xv}{ratio}")
     print(f"wrote {args.out}")
     if plot:
         if len(axes) > 2:
             print("no figure: it shows one or two grid axes", file=sys.stderr)
         else:
-            from rodgains.buckling import greenhill_length
-
-            crit = greenhill_length(params) if names[0] == "rod.length" else None
-            rule = ", robust criterion" if args.criterion == "robust" else ""
-            what = f"{args.scenario} ({args.case}{rule})" if args.scenario != "score" else f"score ({args.cases})"
-            key, label = ("score", "score") if args.scenario == "score" else ("settle_s", "settle to 1 deg [s]")
-            title = f"rodctl sweep: {what} on the faithful plant; {_shown_path(params.source)}"
-            figures.frontier_figure(per_point_rows, names[0], names[1] if len(axes) == 2 else None, Path(plot), title,
-                                    color_key=key, color_label=label, critical_length_m=crit)
+            W.write_figure(sweep, plot, _shown_path(params.source))
             print(f"wrote {plot}")
     return 0
 

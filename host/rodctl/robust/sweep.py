@@ -14,14 +14,18 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, replace
 from decimal import Decimal, InvalidOperation
+from pathlib import Path
+from typing import Callable
 
 from rodgains.errors import InputError, ParamError
 from rodgains.params import SCHEMA, Params, _coerce, _parse_override
 
 MAX_AXIS_POINTS = 1_000_000  # one --grid range, --yes or not
 MAX_RUNS_WITHOUT_YES = 100_000
+SCENARIOS = ("balance", "swingup", "score")  # a task of the matrix at every point, or the whole score
 
 
 @dataclass(frozen=True)
@@ -136,3 +140,149 @@ def frontier(rows: list[dict], x: str, y: str, ok: str = "passed") -> dict:
             best = r[x]
         out[yv] = best
     return out
+
+
+def run_count(params: Params, axes: list[Axis], scenario: str, cases: str, samples: int | None) -> int:
+    """The runs of the whole grid: one per point, or every run of a score per point."""
+    from rodctl.robust import score as S
+
+    per_point = S.unit_count(params, cases, samples) if scenario == "score" else 1
+    return size(axes) * per_point
+
+
+def _point_info(point: dict, index: int) -> tuple:
+    return (("point", index),) + tuple(point.items())
+
+
+def grid_units(params: Params, axes: list[Axis], scenario: str, case: str, criterion: str, cases: str,
+               samples: int | None, seed: int | None, seconds: float | None) -> tuple[list, list[dict]]:
+    """The runs of every grid point, and a refused row for each point whose parameters are not valid.
+
+    scenario: one of SCENARIOS; case: the matrix case of balance/swingup; criterion: "case" (its own
+    pass rule) or "robust"; cases, samples, seed, seconds [s]: what a score is made of.
+    """
+    from rodctl.robust import score as S
+    from rodctl.robust.execute import Unit
+    from rodctl.sim.matrix import CASES
+
+    the_case = CASES[case]
+    if criterion == "robust":
+        the_case = replace(the_case, strict=False)
+    units, rows_refused = [], []
+    for i, point in enumerate(points(axes)):
+        info = _point_info(point, i)
+        try:
+            p = apply(params, point)
+        except ParamError as e:
+            rows_refused.append({**dict(info), "case": case if scenario != "score" else "score",
+                                 "task": scenario, "passed": False, "refused": True,
+                                 "reason": f"invalid parameters: {e}"})
+            continue
+        if scenario == "score":
+            units += S.units(p, cases, samples, seed, seconds, info=info)
+        else:
+            units.append(Unit(p.canonical_json(), the_case, scenario, seconds, info))
+    return units, rows_refused
+
+
+def point_rows(rows: list[dict], names: list[str], scenario: str, params: Params) -> list[dict]:
+    """One verdict per grid point: the run itself, or the score over the point's runs."""
+    from rodctl.robust import score as S
+
+    out = []
+    for i in sorted({r["point"] for r in rows}):
+        sub = [r for r in rows if r["point"] == i]
+        head = {k: sub[0][k] for k in names}
+        if scenario == "score":
+            refused = all(r.get("refused") for r in sub)
+            sc = S.score(sub, apply(params, head)) if not refused else None
+            out.append({**head, "refused": refused, "reason": sub[0].get("reason", "") if refused else "",
+                        "passed": bool(sc and sc.passed == sc.runs),
+                        "score": sc.score if sc else 0.0, "settle_s": None})
+        else:
+            out.append(sub[0])
+    return out
+
+
+@dataclass
+class Sweep:
+    """A finished sweep: a row per run (refused points included), a verdict per grid point, and what ran."""
+
+    params: Params
+    axes: list[Axis]
+    scenario: str
+    case: str
+    criterion: str
+    cases: str
+    rows: list[dict]  # sorted by grid point
+    points: list[dict]
+    wall_s: float
+    critical_length_m: float | None  # continuum critical length when the first axis is rod.length
+
+    @property
+    def names(self) -> list[str]:
+        return [a.name for a in self.axes]
+
+    @property
+    def passed(self) -> int:
+        return sum(1 for r in self.points if r.get("passed"))
+
+    @property
+    def refused(self) -> int:
+        return sum(1 for r in self.points if r.get("refused"))
+
+    def frontier(self) -> dict | None:
+        """frontier() over the two axes; None unless there are two and the first is numeric."""
+        if len(self.axes) == 2 and not isinstance(self.axes[0].values[0], str):
+            return frontier(self.points, self.names[0], self.names[1])
+        return None
+
+    def meta(self, command: str) -> dict:
+        """The Parquet file's metadata; command: the command line that ran the sweep."""
+        return {"command": command, "grid": {a.name: list(a.values) for a in self.axes},
+                "scenario": self.scenario, "case": self.case, "params_sha256": self.params.sha256(),
+                "params_source": self.params.source, "parameters": self.params.values,
+                "wall_s": round(self.wall_s, 1)}
+
+
+def run(params: Params, axes: list[Axis], scenario: str, case: str, criterion: str, cases: str,
+        samples: int | None, seed: int | None, seconds: float | None, *, jobs: int | None = None,
+        scheduler: str | None = None, say: Callable[[str], None] = lambda line: None) -> Sweep:
+    """Every run of the grid (grid_units) on the local pool or the Dask cluster at `scheduler`;
+    say() gets the line that tells how many runs go where."""
+    from rodgains.buckling import greenhill_length
+
+    from rodctl.robust.execute import Runner
+
+    units, rows_refused = grid_units(params, axes, scenario, case, criterion, cases, samples, seed, seconds)
+    t0 = time.monotonic()
+    with Runner(jobs, scheduler) as runner:
+        say(f"sweep: {size(axes)} grid points, {len(units)} runs on the {runner.where}")
+        rows = runner.run(units, desc="sweep")
+    wall = time.monotonic() - t0
+    rows = sorted(rows + rows_refused, key=lambda r: r["point"])
+    names = [a.name for a in axes]
+    crit = greenhill_length(params) if names[0] == "rod.length" else None
+    return Sweep(params, axes, scenario, case, criterion, cases, rows, point_rows(rows, names, scenario, params),
+                 wall, crit)
+
+
+def write_parquet(sweep: Sweep, path: str | Path, command: str) -> Path:
+    """A row per run, with Sweep.meta(command) as the file's metadata."""
+    from rodctl.robust.output import write_parquet as write
+
+    return write(path, sweep.rows, sweep.meta(command))
+
+
+def write_figure(sweep: Sweep, path: str | Path, params_shown: str) -> Path:
+    """The frontier figure of a one- or two-axis sweep; params_shown: the parameter file as the title names it."""
+    from rodctl.robust import figures
+
+    names = sweep.names
+    rule = ", robust criterion" if sweep.criterion == "robust" else ""
+    what = f"{sweep.scenario} ({sweep.case}{rule})" if sweep.scenario != "score" else f"score ({sweep.cases})"
+    key, label = ("score", "score") if sweep.scenario == "score" else ("settle_s", "settle to 1 deg [s]")
+    title = f"rodctl sweep: {what} on the faithful plant; {params_shown}"
+    return figures.frontier_figure(sweep.points, names[0], names[1] if len(sweep.axes) == 2 else None, Path(path),
+                                   title, color_key=key, color_label=label,
+                                   critical_length_m=sweep.critical_length_m)

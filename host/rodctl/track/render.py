@@ -220,7 +220,7 @@ def simulate_filmed_run(params, path, *, swing_deg: float = 50.0, free_s: float 
     from types import SimpleNamespace
 
     from rodctl.build.sil_build import build_sil
-    from rodctl.cli.sim import write_log
+    from rodctl.sim.scenario_run import write_log
     from rodctl.sim.plant import SilController, faithful_plant, run_closed_loop
     from rodctl.sim.scenarios import Trace
 
