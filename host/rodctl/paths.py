@@ -42,6 +42,15 @@ BUILD = Path(os.environ["RODCTL_BUILD_DIR"]) if os.environ.get("RODCTL_BUILD_DIR
     _CLONE / "build" if IN_CLONE else _user_cache() / "build")
 
 
+def shown(path: str | Path, root: Path | None = None) -> str:
+    """A path as shown to the user and in generated text: relative to root (default: the checkout) when
+    inside it, else as given."""
+    try:
+        return str(Path(path).resolve().relative_to((root or REPO).resolve()))
+    except ValueError:
+        return str(path)
+
+
 def require_checkout(what: str) -> None:
     """UserError (one line, exit 2) when rodctl runs from an installed package, not a clone."""
     if not IN_CLONE:

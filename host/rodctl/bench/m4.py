@@ -89,18 +89,12 @@ def _icount_tool() -> Path:
 def header_for_edges(n: int | None, out_dir: Path, *overrides: str, name: str | None = None) -> Path:
     """What `rodctl gains --set rod.edges=n [--set ...] --header out_dir/<name>/rod_gains.h` writes (never the
     committed one); n None keeps the default order."""
-    import argparse
-
-    from rodctl.cli.gains import generated_files
+    from rodctl.build.header import generated_files, write_changed
 
     header = out_dir / (name or f"n{n}") / "rod_gains.h"
     sets = ([f"rod.edges={n}"] if n is not None else []) + list(overrides)
-    args = argparse.Namespace(params=None, overrides=sets, header=str(header))
-    _, files = generated_files(args)
-    for path, text in files.items():
-        path.parent.mkdir(parents=True, exist_ok=True)
-        if not path.exists() or path.read_text() != text:
-            path.write_text(text)
+    _, files = generated_files(None, sets, str(header))
+    write_changed(files)
     return header
 
 

@@ -130,15 +130,6 @@ def summarize_failure(output: str, platform: str) -> str:
     return lines[-1] if lines else "no output"
 
 
-def write_changed(files: dict[Path, str]) -> list[Path]:
-    """Write each generated file ({path: text}) that is missing or differs; returns those written."""
-    stale = [f for f, text in files.items() if not f.exists() or f.read_text() != text]
-    for f in stale:
-        f.parent.mkdir(parents=True, exist_ok=True)
-        f.write_text(files[f])
-    return stale
-
-
 def pio_log(env: str) -> Path:
     """build/pio-<env>.log, its folder created."""
     log = paths.BUILD / f"pio-{env}.log"

@@ -11,7 +11,6 @@ copy, with the firmware's warning set. Builds are cached by content (rodctl.buil
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 from rodgains.atomic_file import atomic_write
@@ -34,11 +33,10 @@ def write_header(params, command: str | None = None, out_root: Path | None = Non
     from rodgains.codegen import header_text
     from rodgains.design import design
 
-    from rodctl.cli.gains import regenerate_command
+    from rodctl.build.header import regenerate_command
 
     if command is None:
-        ns = argparse.Namespace(params=None, overrides=[], header=None)
-        command = regenerate_command(ns)
+        command = regenerate_command(None, [], None)
     text = header_text(design(params), command)
     folder = Path(out_root or paths.BUILD / "sil") / params.sha256()[:16]
     try:

@@ -14,7 +14,7 @@ from rodctl.cli.outputs import check_output
 def _design(args):
     from rodgains.params import DEFAULT_PARAMS, load_params
 
-    from rodctl.logs.metadata import shown
+    from rodctl.paths import shown
 
     params = load_params(args.params, args.overrides)
     label = shown(args.params or DEFAULT_PARAMS)

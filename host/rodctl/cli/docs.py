@@ -7,13 +7,6 @@ import sys
 from rodctl import paths
 
 
-def _shown(p) -> str:
-    try:
-        return str(p.resolve().relative_to(paths.REPO.resolve()))
-    except ValueError:
-        return str(p)
-
-
 def run_docs(args) -> int:
     from rodctl import docsgen
 
@@ -21,18 +14,13 @@ def run_docs(args) -> int:
     if args.check:
         stale = docsgen.stale_files()
         if stale:
-            print(f"rodctl docs --check: {', '.join(_shown(p) for p in stale)} not what the code generates; "
+            print(f"rodctl docs --check: {', '.join(paths.shown(p) for p in stale)} not what the code generates; "
                   f"regenerate with: {docsgen.COMMAND}", file=sys.stderr)
             return 1
-        print(f"up to date: {', '.join(_shown(p) for p in docsgen.generated_files())}")
+        print(f"up to date: {', '.join(paths.shown(p) for p in docsgen.generated_files())}")
         return 0
-    written = []
-    for path, text in docsgen.generated_files().items():
-        path.parent.mkdir(parents=True, exist_ok=True)
-        if not path.is_file() or path.read_text() != text:
-            path.write_text(text)
-            written.append(path)
-    print(f"wrote {', '.join(_shown(p) for p in written)}" if written else "up to date: nothing to write")
+    written = docsgen.write_stale()
+    print(f"wrote {', '.join(paths.shown(p) for p in written)}" if written else "up to date: nothing to write")
     return 0
 
 

@@ -12,7 +12,6 @@ build/pio-<env>.log (or to the terminal with --verbose); a failure is summarized
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -20,22 +19,21 @@ from pathlib import Path
 from rodgains.errors import UserError
 
 from rodctl import paths
+from rodctl.build import header as gains_header
 from rodctl.build import platformio
 from rodctl.link.session import is_tty
 
 
 def ensure_header(args) -> None:
     """Regenerate firmware/include/rod_gains.h (+ .toml) when the parameters changed."""
-    from rodctl.cli.gains import generated_files
+    from rodctl.cli.gains import robust_progress
 
-    ns = argparse.Namespace(params=args.params, overrides=args.overrides, header=None)
     print("checking the gains header against the parameters (designing) ...", file=sys.stderr, flush=True)
     t = time.monotonic()
-    d, files = generated_files(ns)
-    stale = platformio.write_changed(files)
+    d, files = gains_header.generated_files(args.params, args.overrides, None, progress=robust_progress)
+    stale = gains_header.write_changed(files)
     if stale:
-        shown = ", ".join(str(Path(f).relative_to(paths.REPO)) if paths.REPO in Path(f).parents else str(f)
-                          for f in stale)
+        shown = ", ".join(paths.shown(f) for f in stale)
         print(f"parameters changed: regenerated {shown} (N={d.N}, {1 / d.dt:g} Hz) in {time.monotonic() - t:.1f} s",
               file=sys.stderr, flush=True)
     else:

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
 import sys
 from pathlib import Path
 
 from rodgains.errors import InputError
-from rodgains.params import DEFAULT_PARAMS, Params, load_params
+from rodgains.params import Params, load_params
 
 from rodctl import paths
+from rodctl.build import header as gains_header
 from rodctl.cli.outputs import (check_name, check_not_input, check_output, check_output_folder, check_regenerable,
                                 make_folder)
 
@@ -26,36 +26,6 @@ def params_from_args(args) -> Params:
     return load_params(args.params, args.overrides)
 
 
-def _shown_path(path: str | Path) -> str:
-    """A path as it goes into generated text: relative to the checkout when inside it."""
-    p = Path(path).resolve()
-    try:
-        return str(p.relative_to(paths.REPO))
-    except ValueError:
-        return str(path)
-
-
-def regenerate_command(args) -> str:
-    """The command that regenerates the header, in a form independent of how it was spelled."""
-    parts = ["rodctl", "gains"]
-    if args.params and Path(args.params).resolve() != DEFAULT_PARAMS.resolve():
-        parts += ["--params", _shown_path(args.params)]
-    for o in args.overrides:
-        parts += ["--set", o]
-    if args.header and Path(args.header).resolve() != paths.COMMITTED_HEADER.resolve():
-        parts += ["--header", _shown_path(args.header)]
-    return " ".join(shlex.quote(x) for x in parts)
-
-
-def params_copy_text(p: Params, command: str) -> str:
-    return (
-        "# rod_gains.toml -- DO NOT EDIT: the parameters rod_gains.h was generated from.\n"
-        f"# Regenerate: {command}\n"
-        f"# Inputs SHA-256: {p.sha256()}\n"
-        + p.to_toml()
-    )
-
-
 def robust_progress(run: int, most: int) -> None:
     """One line per L-BFGS run of a robust refinement (design.method = robust): 1 to 3 s each, up to
     half a minute in all on a new parameter file; a cached design prints nothing."""
@@ -68,16 +38,13 @@ def robust_progress(run: int, most: int) -> None:
 
 
 def generated_files(args) -> tuple[object, dict[Path, str]]:
-    """Design, then the files `rodctl gains` would write: {path: text}."""
-    from rodgains.codegen import header_text
-    from rodgains.design import design
+    """Design, then the files `rodctl gains` would write: (Design, {path: text}), the robust refinement's
+    progress on stderr."""
+    return gains_header.generated_files(args.params, args.overrides, args.header, progress=robust_progress)
 
-    p = params_from_args(args)
-    d = design(p, progress=robust_progress)
-    command = regenerate_command(args)
-    header = Path(args.header) if args.header else paths.COMMITTED_HEADER
-    files = {header: header_text(d, command), header.with_suffix(".toml"): params_copy_text(p, command)}
-    return d, files
+
+def regenerate_command(args) -> str:
+    return gains_header.regenerate_command(args.params, args.overrides, args.header)
 
 
 def buckling_warning(p: Params) -> str | None:
@@ -127,7 +94,7 @@ def run_gains(args) -> int:
 
         sys.stdout.write("\n".join(report_lines(d)) + "\n")
     if args.check:
-        stale = [f for f, text in files.items() if not f.exists() or f.read_text() != text]
+        stale = gains_header.stale(files)
         if stale:
             names = ", ".join(str(f) for f in stale)
             print(f"rodctl gains --check: {names} not what the parameters generate; "

@@ -10,13 +10,6 @@ from rodgains.errors import InputError
 from rodctl import paths
 
 
-def _shown(p: Path, root: Path) -> str:
-    try:
-        return str(p.resolve().relative_to(root.resolve()))
-    except ValueError:
-        return str(p)
-
-
 def run_protocol(args) -> int:
     from rodctl.link import protocol_gen as gen
 
@@ -28,18 +21,18 @@ def run_protocol(args) -> int:
     if args.check:
         stale = gen.stale_files(root)
         if stale:
-            names = ", ".join(_shown(p, root) for p in stale)
+            names = ", ".join(paths.shown(p, root) for p in stale)
             print(f"rodctl protocol --check: {names} not what {gen.TOML_REL} generates; "
                   f"regenerate with: {gen.COMMAND}", file=sys.stderr)
             return 1
-        print(f"up to date: {', '.join(_shown(p, root) for p in gen.generated_files(root))}")
+        print(f"up to date: {', '.join(paths.shown(p, root) for p in gen.generated_files(root))}")
         return 0
     from rodctl.cli.outputs import check_output
 
     for p in gen.generated_files(root):  # every target, before the first is written
         check_output(p, "cannot write", make_parent=True)
     written = gen.write_files(root)
-    print(f"wrote {', '.join(_shown(p, root) for p in written)}")
+    print(f"wrote {', '.join(paths.shown(p, root) for p in written)}")
     return 0
 
 

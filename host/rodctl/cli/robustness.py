@@ -7,7 +7,8 @@ import sys
 import time
 from pathlib import Path
 
-from rodctl.cli.gains import _shown_path, add_param_args, params_from_args
+from rodctl.cli.gains import add_param_args, params_from_args
+from rodctl.paths import shown
 from rodctl.cli.outputs import check_output
 
 
@@ -126,7 +127,7 @@ def run_robustness(args) -> int:
         print(f"{len(units)} runs (case set {args.cases!r}" + (f", {drawn} of them on Monte Carlo plants" if drawn else "")
               + f") on the {runner.where}", file=sys.stderr)
         if plant is not None:
-            print(f"the design of {_shown_path(params.source)} judged on the rod of {_shown_path(plant.source)}",
+            print(f"the design of {shown(params.source)} judged on the rod of {shown(plant.source)}",
                   file=sys.stderr)
         rows = runner.run(units, desc="robustness")
         where = runner.where
@@ -156,9 +157,9 @@ def run_robustness(args) -> int:
         }
         written.append(write_json(args.json, doc))
     if args.plot:
-        on = "faithful plant" if plant is None else f"rod of {_shown_path(plant.source)}"
+        on = "faithful plant" if plant is None else f"rod of {shown(plant.source)}"
         draws = f" + {samples} Monte Carlo plants (seed {seed})" if samples else ""
-        title = f"{_shown_path(params.source)}: {sc.text()}\ncase set {args.cases!r}{draws} on the {on}"
+        title = f"{shown(params.source)}: {sc.text()}\ncase set {args.cases!r}{draws} on the {on}"
         written.append(figures.heatmap(rows, Path(args.plot), title))
     for w in written:
         print(f"wrote {w}")

@@ -5,7 +5,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from rodctl.cli.gains import _shown_path, add_param_args, params_from_args
+from rodctl.cli.gains import add_param_args, params_from_args
+from rodctl.paths import shown
 from rodctl.cli.outputs import check_output
 from rodctl.cli.robustness import add_exec_args, add_score_args, check_score_args, command_line
 
@@ -52,7 +53,7 @@ def run_sweep(args) -> int:
         if len(axes) > 2:
             print("no figure: it shows one or two grid axes", file=sys.stderr)
         else:
-            W.write_figure(sweep, plot, _shown_path(params.source))
+            W.write_figure(sweep, plot, shown(params.source))
             print(f"wrote {plot}")
     return 0
 

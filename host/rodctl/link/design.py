@@ -13,7 +13,8 @@ from rodctl.link.session import Session, parse_assignment
 
 def design_params(session: Session, args=None):
     """(Params, source) the firmware's gains came from, matched by the HELLO's header hash."""
-    from rodctl.logs.metadata import identify_params, shown
+    from rodctl.logs.metadata import identify_params
+    from rodctl.paths import shown
 
     cands = []
     if args is not None and (getattr(args, "params", None) or getattr(args, "overrides", None)):

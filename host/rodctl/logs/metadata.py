@@ -10,7 +10,6 @@ import datetime as _dt
 import json
 import math
 import time
-from pathlib import Path
 
 from rodgains.errors import UserError
 
@@ -22,14 +21,6 @@ from rodctl.logs.schema import FORMAT_VERSION
 
 def utc_now() -> str:
     return _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
-
-
-def shown(p) -> str:
-    """A path as shown to the user: relative to the checkout when inside it."""
-    try:
-        return str(Path(p).resolve().relative_to(paths.REPO))
-    except ValueError:
-        return str(p)
 
 
 def _settings_json(hello) -> str:
@@ -52,8 +43,8 @@ def identify_params(header_sha256: str, candidates=()):
     """
     from rodgains.params import DEFAULT_PARAMS, load_params
 
-    tried = list(candidates) + [(paths.COMMITTED_PARAMS, shown(paths.COMMITTED_PARAMS)),
-                                (DEFAULT_PARAMS, shown(DEFAULT_PARAMS))]
+    tried = list(candidates) + [(paths.COMMITTED_PARAMS, paths.shown(paths.COMMITTED_PARAMS)),
+                                (DEFAULT_PARAMS, paths.shown(DEFAULT_PARAMS))]
     for cand, label in tried:
         try:
             p = cand if hasattr(cand, "sha256") else load_params(cand)

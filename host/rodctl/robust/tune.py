@@ -362,7 +362,7 @@ def write_trials(study, path: Path) -> None:
 def tuned_file(params: Params, summary: dict, dims: tuple[Dim, ...], reproduce: str, check: str,
                goals: bool = False) -> str:
     """The complete parameter file of the best trial, with comments saying how it came to be."""
-    from rodctl.cli.gains import _shown_path as shown_path
+    from rodctl.paths import shown as shown_path
 
     best_p = candidate(params, summary["best_values"])
     b, s = summary["best"], summary["start"]

@@ -1,0 +1,67 @@
+"""The generated gains header and its parameter copy, for a parameter file and its overrides.
+
+    d, files = generated_files("my_rig.toml", ["rod.edges=8"], header=None)   # {path: text}, not written
+    written = write_changed(files)                                              # only what differs
+
+Both files name the command that regenerates them, spelled the same however it was typed.
+"""
+
+from __future__ import annotations
+
+import shlex
+from pathlib import Path
+from typing import Callable, Sequence
+
+from rodgains.params import DEFAULT_PARAMS, Params, load_params
+
+from rodctl import paths
+
+
+def regenerate_command(params_path: str | None, overrides: Sequence[str], header: str | None) -> str:
+    """`rodctl gains ...` that regenerates the header: the default parameter file and the committed header
+    are left out, other paths shown relative to the checkout."""
+    parts = ["rodctl", "gains"]
+    if params_path and Path(params_path).resolve() != DEFAULT_PARAMS.resolve():
+        parts += ["--params", paths.shown(params_path)]
+    for o in overrides:
+        parts += ["--set", o]
+    if header and Path(header).resolve() != paths.COMMITTED_HEADER.resolve():
+        parts += ["--header", paths.shown(header)]
+    return " ".join(shlex.quote(x) for x in parts)
+
+
+def params_copy_text(p: Params, command: str) -> str:
+    return (
+        "# rod_gains.toml -- DO NOT EDIT: the parameters rod_gains.h was generated from.\n"
+        f"# Regenerate: {command}\n"
+        f"# Inputs SHA-256: {p.sha256()}\n"
+        + p.to_toml()
+    )
+
+
+def generated_files(params_path: str | None, overrides: Sequence[str], header: str | None,
+                    progress: Callable[[int, int], None] | None = None) -> tuple[object, dict[Path, str]]:
+    """Design, then the files `rodctl gains` would write: (Design, {path: text}). header None: the committed
+    one. progress(run, most): each optimizer run of a robust refinement (design.method = robust)."""
+    from rodgains.codegen import header_text
+    from rodgains.design import design
+
+    p = load_params(params_path, list(overrides))
+    d = design(p, progress=progress)
+    command = regenerate_command(params_path, overrides, header)
+    target = Path(header) if header else paths.COMMITTED_HEADER
+    return d, {target: header_text(d, command), target.with_suffix(".toml"): params_copy_text(p, command)}
+
+
+def stale(files: dict[Path, str]) -> list[Path]:
+    """The generated files ({path: text}) that are missing or differ from what is on disk."""
+    return [f for f, text in files.items() if not f.exists() or f.read_text() != text]
+
+
+def write_changed(files: dict[Path, str]) -> list[Path]:
+    """Write each generated file ({path: text}) that is missing or differs; returns those written."""
+    written = stale(files)
+    for f in written:
+        f.parent.mkdir(parents=True, exist_ok=True)
+        f.write_text(files[f])
+    return written
