@@ -105,7 +105,7 @@ def test_experiments_played_one_after_another_on_one_rig():
     Rig E's 2 deg of play let the rod rattle unseen after the free swing, and the motor rests on a
     flank at each start: with records started mid-gap at the first count, and no settle move, its
     viscous friction came out 17.8 % low (docs/identification.md)."""
-    from rodctl.cli.identify import SETTLE_S
+    from rodctl.ident.run import SETTLE_S
 
     hidden = hidden_params("E")
     plant = faithful_plant(hidden, input_mode="duty")
@@ -384,7 +384,7 @@ def test_a_case_the_default_design_drops_on_a_hidden_rig_holds_with_the_identifi
 def test_identify_says_how_far_the_identified_rod_is_from_buckling(tmp_path):
     """Rig B's rod above the hub is 0.98 x its clamped buckling length; rig A's 0.91 x, and no matrix case
     takes A past it."""
-    from rodctl.cli.identify import buckling_line
+    from rodctl.ident.logs import buckling_line
 
     b = buckling_line(_identified("B", tmp_path)).splitlines()
     assert b[0].startswith("buckling: the rod above the hub is 0.98") and "it reaches 1 at E -" in b[0]

@@ -1,5 +1,6 @@
 """rodctl identify: run identification experiments on the board (or fit recorded logs) and write a
-parameter file with the rig's identified motor and rod values."""
+parameter file with the rig's identified motor and rod values. The workflow is rodctl.ident.run (the
+board's experiments) and rodctl.ident.logs (the fit of their logs)."""
 
 from __future__ import annotations
 
@@ -8,30 +9,13 @@ import datetime as _dt
 import math
 import shlex
 import sys
-import time
 from pathlib import Path
 
-from rodgains.errors import InputError, UserError
+from rodgains.errors import InputError
 
 from rodctl.cli.common import add_design_args, add_port_arg
 from rodctl.cli.outputs import check_output, make_folder
-
-REST_RATE_RAD_S = 0.05  # the rod counts as at rest below this base rate ...
-REST_HOLD_S = 0.5  # ... for this long
-REST_TIMEOUT_S = 20.0
-# After the settle move (experiments.settle_move) the rod is near rest; this wait lets what is left
-# of its sway die out before the next record starts (docs/identification.md).
-SETTLE_S = 2.0
-END_MARGIN_S = 3.0  # beyond the experiment's duration before the host gives up waiting
-# The default amplitudes are sized for the nominal rig; a livelier one (softer rod, less back-EMF
-# damping) can swing a chirp into the firmware's 60 deg limit and FAULT: 1 of 30 random rigs, whose
-# steps also reached 56 deg, while the other 29 stayed within 46 deg in every experiment. The host
-# stops an experiment (DISARM, no FAULT) once the swing passes this fraction of the firmware's angle
-# or speed limit (48 deg, 32 rad/s), and plays it again RETRY_SCALE times smaller, at most MAX_TRIES
-# times in all.
-SOFT_LIMIT_FRACTION = 0.8
-RETRY_SCALE = 0.7
-MAX_TRIES = 3
+from rodctl.ident.run import MAX_TRIES, RETRY_SCALE, SETTLE_S, SOFT_LIMIT_FRACTION
 
 
 def _nominal(args, meta: dict | None = None):
@@ -60,126 +44,13 @@ def _confirm(args, text: str) -> None:
         raise InputError("stopped before moving the motor (not confirmed)")
 
 
-def _wait_rest(session, settle: float = 0.0) -> None:
-    """`settle` seconds, then until the base holds still (the fit starts every record at rest); a
-    FAULT is reported."""
-    from rodctl.link import protocol as P
-    from rodctl.link.session import reason_text
-
-    if settle > 0:
-        print(f"  letting the rod settle for {settle:g} s", file=sys.stderr, flush=True)
-        end = time.monotonic() + settle
-        while time.monotonic() < end:
-            session.check()
-            time.sleep(0.05)
-    still_since, deadline = None, time.monotonic() + REST_TIMEOUT_S
-    while time.monotonic() < deadline:
-        session.check()
-        t = session.wait_telemetry(timeout=1.0)
-        if t.mode == P.Mode.FAULT:
-            raise UserError(f"device is in FAULT ({reason_text(t.reason)}): run `rodctl clear-fault` first")
-        if abs(t.base_rate) < REST_RATE_RAD_S:
-            still_since = still_since or time.monotonic()
-            if time.monotonic() - still_since >= REST_HOLD_S:
-                return
-        else:
-            still_since = None
-        time.sleep(0.02)
-    raise UserError(f"the rod did not come to rest within {REST_TIMEOUT_S:g} s (|base rate| < {REST_RATE_RAD_S} rad/s)")
-
-
-class SwingWatch:
-    """Session listener: the largest swing from hanging [rad] and base speed [rad/s] seen in
-    IDENTIFY telemetry, and whether either passed its soft limit (every frame, not only the
-    ones the polling loop happens to read)."""
-
-    def __init__(self, params, fraction: float = SOFT_LIMIT_FRACTION):
-        """fraction: of the firmware's limits [-]; 1 watches without ever stopping (the firmware trips first)."""
-        from rodctl.link import protocol as P
-
-        self._telemetry, self._identify = P.MsgType.TELEMETRY, P.Mode.IDENTIFY
-        self.rad_per_count = params.rad_per_count
-        self.fraction = fraction
-        self.angle_soft_rad = fraction * math.radians(params["safety"]["angle_limit_deg"])
-        self.speed_soft_rad_s = fraction * params["safety"]["speed_limit"]
-        self.angle_rad = 0.0
-        self.speed_rad_s = 0.0
-        self.over = ""  # what passed its soft limit first ("" while nothing has)
-
-    def __call__(self, frame, _host_time_s) -> None:
-        if frame.type != self._telemetry or frame.msg.mode != self._identify:
-            return
-        # the firmware's angle from hanging: the count wrapped to one output turn
-        a = abs(math.remainder(frame.msg.encoder_count * self.rad_per_count, 2.0 * math.pi))
-        w = abs(frame.msg.base_rate)
-        self.angle_rad, self.speed_rad_s = max(self.angle_rad, a), max(self.speed_rad_s, w)
-        if self.fraction >= 1.0:
-            return
-        if not self.over and a > self.angle_soft_rad:
-            self.over = f"swung {math.degrees(a):.0f} deg from hanging (soft limit {math.degrees(self.angle_soft_rad):.0f} deg)"
-        elif not self.over and w > self.speed_soft_rad_s:
-            self.over = f"reached {w:.1f} rad/s (soft limit {self.speed_soft_rad_s:.1f} rad/s)"
-
-
-def run_experiment(session, exp, log_path: Path | None, params, params_source: str, watch: SwingWatch | None = None):
-    """Play one experiment while logging every frame to log_path (None: not logged, the settle move);
-    returns (log path, final telemetry). With a `watch`, the experiment is stopped (DISARM) as soon as
-    watch.over says the swing passed its soft limit."""
-    from rodctl.link import protocol as P
-    from rodctl.logs import LogWriter, device_metadata
-
-    writer = None
-    if log_path is not None:
-        meta = device_metadata(session.hello, port=session.port, params=params, params_source=params_source,
-                               start_unix=session.open_unix)
-        writer = LogWriter(log_path, meta, n=session.hello.n)
-        session.add_listener(writer, replay=False)
-    if watch is not None:
-        session.add_listener(watch, replay=False)
-    ended = "error"
-    try:
-        session.command(exp.command(), what=f"identify {exp.name}")
-        deadline = time.monotonic() + exp.duration + END_MARGIN_S
-        last = session.wait_telemetry(timeout=1.0)
-        started = time.monotonic()
-        seen = False  # telemetry queued before the ACK still shows DISARMED: wait for IDENTIFY first
-        while time.monotonic() < deadline:
-            time.sleep(0.01)
-            session.check()
-            if watch is not None and watch.over:
-                session.disarm()
-                ended = "stopped: " + watch.over
-                time.sleep(0.1)  # the frames already on their way
-                return log_path, session.telemetry
-            if writer is not None:
-                writer.maybe_flush()  # rows reach the file while the rod moves: a crash keeps them
-            last = session.telemetry
-            if last is None:
-                continue
-            seen = seen or last.mode == P.Mode.IDENTIFY
-            if last.mode != P.Mode.IDENTIFY and (seen or time.monotonic() - started > 1.0):
-                break
-        else:
-            ended = "timeout"
-            raise UserError(f"{exp.name}: still in IDENTIFY {END_MARGIN_S:g} s after its end; disarmed")
-        time.sleep(0.1)  # the frames already on their way
-        ended = "fault" if last.mode == P.Mode.FAULT else "done"
-        return log_path, last
-    finally:
-        if ended != "done" and not ended.startswith("stopped"):
-            try:
-                session.disarm()
-            except UserError:
-                pass
-        if watch is not None:
-            session.remove_listener(watch)
-        if writer is not None:
-            session.remove_listener(writer)
-            writer.close({"end": ended, "experiment": exp.describe()})
+def _say(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
 
 
 def run_port(args) -> int:
     from rodctl.ident import experiments as E
+    from rodctl.ident.logs import incomplete_run
 
     if not 0 < args.scale <= 4:
         raise InputError(f"--scale must be in (0, 4], got {args.scale:g}")
@@ -208,31 +79,12 @@ def run_port(args) -> int:
         return 130
 
 
-def _settle(session, settle, limits, source: str, args, log_dir: Path) -> None:
-    """Play the settle move (not logged; `limits`: the parameters whose safety limits the watch uses), then
-    wait --settle seconds and for a still base."""
-    from rodctl.link import protocol as P
-    from rodctl.link.session import reason_text
-
-    watch = SwingWatch(limits, args.soft_limit)
-    _, last = run_experiment(session, settle, None, limits, source, watch)
-    if last.mode == P.Mode.FAULT:
-        raise UserError(f"settle move: safety limit tripped: {reason_text(last.reason)} ({P.Reason(last.reason).name}); "
-                        f"the motor is stopped (FAULT); the logs so far are in {log_dir}")
-    if watch.over:
-        raise UserError(f"settle move: {watch.over}; motor stopped: is the rod free to swing, and hanging? "
-                        f"The logs so far are in {log_dir}")
-    _wait_rest(session, args.settle)
-
-
 def _run_and_fit(args, exps, log_dir: Path, stamp: str) -> int:
     from rodctl.cli.common import stop_signals
-    from rodctl.ident import experiments as E
-    from rodctl.link import protocol as P
+    from rodctl.ident import run as RUN
     from rodctl.link.design import design_params
-    from rodctl.link.session import Session, hello_counts_per_rev, reason_text
+    from rodctl.link.session import Session
 
-    logs = []
     with stop_signals(), Session(args.port) as session:
         # the rod the user measured (--params) is the fit's nominal rig, whatever gains the board was
         # flashed with (the records are the duty it played); without it, the board's own file. The
@@ -242,172 +94,22 @@ def _run_and_fit(args, exps, log_dir: Path, stamp: str) -> int:
         params, source = (board, board_source) if board is not None and not explicit else _nominal(args)
         limits = board if board is not None else params
         h = session.hello
-        # the board reduces counts with its own counts per turn (a rig setting); the fit reads them the same way
-        board_counts = hello_counts_per_rev(h)
-        if board_counts:
-            params = params.with_counts_per_rev(board_counts)
-        if h.decimation != 1:
-            session.set("telemetry_decimation", 1)  # the fit replays every period's duty
+        params = RUN.prepare(session, params)
         print(f"identify: {session.port}, firmware N={h.n} at {1e6 / h.period_us:g} Hz; nominal parameters: {source}",
               file=sys.stderr)
-        settle = E.settle_move(params)
-        for i, exp in enumerate(exps, 1):
-            for attempt in range(1, MAX_TRIES + 1):
-                # the first record starts from the rod the user hung still; every later one from where
-                # the last experiment left the rig, which the settle move brings back to rest
-                first = i == 1 and attempt == 1
-                _wait_rest(session)  # a stopped experiment leaves the rod swinging: the settle move starts from rest
-                _confirm(args, f"[{i}/{len(exps)}] {exp.describe()}" + ("" if first else f"\n  before it, {settle.describe()}"))
-                if not first:
-                    _settle(session, settle, limits, source, args, log_dir)
-                path = log_dir / f"identify-{stamp}-{exp.name}{'' if attempt == 1 else f'-{attempt}'}.csv"
-                watch = SwingWatch(limits, args.soft_limit)
-                path, last = run_experiment(session, exp, path, params, source, watch)
-                if last.mode == P.Mode.FAULT:
-                    # a livelier rig than the amplitudes were sized for (softer rod, weaker back-EMF damping)
-                    hint = (f"; for smaller swings: --scale {RETRY_SCALE * args.scale:.2g}"
-                            if last.reason in (P.Reason.ANGLE_LIMIT, P.Reason.SPEED_LIMIT) else "")
-                    raise UserError(f"{exp.name}: safety limit tripped: {reason_text(last.reason)} "
-                                    f"({P.Reason(last.reason).name}); the motor is stopped (FAULT); log kept: "
-                                    f"{path}{hint}")
-                if not watch.over:
-                    break
-                # the stopped run's log stays on disk (it is a clean record), but the fit takes the
-                # complete run: the amplitudes were chosen to excite every parameter for its whole length
-                smaller = exp.scaled(torque=RETRY_SCALE)
-                if attempt == MAX_TRIES:
-                    raise UserError(f"{exp.name}: {watch.over} at {exp.amplitude * 1e3:.3g} mN m, after "
-                                    f"{MAX_TRIES} tries; motor stopped; logs kept in {log_dir}; "
-                                    f"for smaller swings: --scale {args.scale * RETRY_SCALE ** MAX_TRIES:.2g}")
-                print(f"  stopped: {watch.over}; log kept: {path}; playing it again at "
-                      f"{smaller.amplitude * 1e3:.3g} mN m ({RETRY_SCALE:g} x)", file=sys.stderr, flush=True)
-                exp = smaller
-            logs.append(path)
-            print(f"  done: {path} (largest swing {math.degrees(watch.angle_rad):.0f} deg from hanging, "
-                  f"{watch.speed_rad_s:.1f} rad/s)", file=sys.stderr, flush=True)
-    return fit_logs(args, logs, params, source)
+        logs = RUN.run_experiments(session, exps, log_dir, stamp, params, source, limits, scale=args.scale,
+                                   soft_limit=args.soft_limit, settle_s=args.settle,
+                                   confirm=lambda text: _confirm(args, text), say=_say)
+    return _fit(args, logs, params, source)
 
 
-def fit_logs(args, logs: list[Path], params=None, source: str = "") -> int:
-    from rodctl.ident import experiments as E
-    from rodctl.ident import fit as F
-    from rodctl.ident import report as R
+def _fit(args, logs: list[Path], params=None, source: str = "") -> int:
+    from rodctl.ident.logs import fit_logs
 
-    records, digests, meta0, skipped = [], [], None, 0
-    for path in logs:
-        meta, recs = E.records_from_log(path)
-        why = _ended_early(meta)
-        if why is not None:
-            # the live run fits only the runs that played to their end (a stopped one is played again
-            # smaller): fitting its logs afterwards, by the glob a Ctrl-C names, must fit the same records
-            print(f"fit: skipping {path}: the experiment did not play to its end ({why})", file=sys.stderr, flush=True)
-            skipped += 1
-            continue
-        meta0 = meta0 or meta
-        records += recs
-        digests.append((Path(path).name, E.file_sha256(path)))
-    if skipped and not digests:
-        raise InputError(f"no experiment log played to its end ({skipped} skipped): nothing to fit")
-    if params is None:
-        params, source = _nominal(args, meta0)
-    print(f"fit: {len(records)} records, {sum(r.seconds for r in records):.1f} s of excitation; nominal: {source}",
-          file=sys.stderr, flush=True)
-    model = F.fit_model(params, exact=args.exact_plant)
-    own = "the parameter file's [plant]"
-    print(f"fit plant: {own if not model else ', '.join(model) + ', then a polish on ' + own}",
-          file=sys.stderr, flush=True)
-    res = F.fit(records, params, starts=args.starts, progress=F.progress_printer(), model=model)
-    print(f"identified in {res.seconds:.1f} s ({res.evaluations} simulations); "
-          f"theta_1 residual {res.rms_counts:.2f} counts RMS; validation (held-out {100 * F.VALIDATION_FRACTION:g} %): "
-          f"{F.validation_text(res.validation_fit_pct)}")
-    print("\n".join(F.report_lines(res)))
-    print("identifiability:")
-    print("\n".join("  " + s for s in F.identifiability_text(res)))
-    identified = R.identified_params(params, res)
-    print(buckling_line(identified))
-    choice = _choose_compensation(args, identified)
-    out = Path(args.out)
-    verdict = _verdict(args, R.written_params(params, res, choice))
-    lines = verdict.lines(str(out))
-    out.write_text(R.parameter_file(params, res, digests, compensation=choice, verdict=lines))
-    plot = plot_path(args)
-    R.figure(res, plot)
-    print(f"wrote {out} and {plot}")
-    for name, why in res.out_of_range.items():
-        print(f"rodctl: {name}: {why}; kept nominal in {out}", file=sys.stderr)
-    print("\n".join(lines))  # last, where no one can miss it
-    return 0 if verdict.ready and not res.out_of_range else 1
-
-
-def _ended_early(meta: dict) -> str | None:
-    """How an experiment log of `rodctl identify` ended when it did not play to its end ("stopped: swung
-    ..." past the soft limit, "interrupted: ..." where the log says "error" (a Ctrl-C or a lost link), "fault",
-    "timeout"); None for a complete run, or a log without that record (another tool's, or one a kill cut off)."""
-    end = meta.get("end")
-    if end in (None, "", "done"):
-        return None
-    return "interrupted: Ctrl-C or a lost link" if end == "error" else str(end)
-
-
-def incomplete_run(path: Path) -> str | None:
-    """_ended_early for a log on disk."""
-    from rodctl.logs import read_log
-
-    try:
-        return _ended_early(read_log(path, columns=["mode_code"]).trailer)
-    except Exception:  # noqa: BLE001 - an unreadable log is reported by the fit that reads it
-        return None
-
-
-def _verdict(args, written):
-    """The matrix on the identified rig's faithful plant with the design about to be written."""
-    from rodctl.ident.verdict import judge
-
-    cases = "nominal" if args.compensation_cases == "none" else args.compensation_cases
-    print(f"verdict: the written design on the identified rig, gearbox included (matrix case set {cases})",
-          file=sys.stderr, flush=True)
-    return judge(written, cases, jobs=args.jobs)
-
-
-def buckling_line(identified) -> str:
-    """How far the identified rod is from buckling, and which matrix cases take it past."""
-    from rodgains.buckling import clamped_ratio, margins_text
-
-    from rodctl.sim.matrix import buckled_cases
-
-    ratio = clamped_ratio(identified)
-    text = (f"buckling: the rod above the hub is {ratio:.3f} x its clamped buckling length (Greenhill)"
-            + (f"; it reaches 1 at {margins_text(identified)}" if 0.0 < ratio < 1.0 else ""))
-    past = buckled_cases(identified)
-    if past:
-        text += ("\n  past it in the robustness matrix: " + ", ".join(f"{n} {v:.3f} x" for n, v in past.items())
-                 + "; measured, no design held a matrix run straight past 1.002 x (docs/identification.md)")
-    return text
-
-
-def _choose_compensation(args, identified):
-    """The friction compensation for the identified rig, judged by the matrix (ident/compensation.py);
-    None: keep the nominal file's."""
-    from rodctl.ident import compensation as C
-
-    if args.compensation_cases == "none":
-        return None
-    if identified["motor"]["coulomb_friction"] < C.MIN_COULOMB_NM:
-        choice = C.without_friction(identified, args.compensation_cases)
-        print(f"friction compensation: 0 mN m ({choice.note})")
-        return choice
-    print(f"friction compensation: {', '.join(f'{r:g}' for r in C.RATIOS)} x the identified Coulomb friction and "
-          f"the nominal file's {1e3 * identified['lqr']['friction_compensation']:.2f} mN m, each judged by the "
-          f"robustness matrix ({args.compensation_cases}) on the identified rig with an ideal gearbox (the play's "
-          "lean would swamp the difference; the closing verdict keeps the play, so its counts differ)",
-          file=sys.stderr, flush=True)
-    choice = C.choose(identified, cases=args.compensation_cases, jobs=args.jobs,
-                      say=lambda line: print(f"friction compensation: {line}", file=sys.stderr, flush=True))
-    for c in choice.candidates:
-        print(f"  {c.line()}", file=sys.stderr)
-    print(f"friction compensation: {1e3 * choice.best.torque_nm:.2f} mN m ({choice.best.ratio:.3g} x)"
-          f"{choice.best.with_weight(', ')}")
-    return choice
+    ok = fit_logs(logs, params, source, nominal=lambda meta: _nominal(args, meta), out=Path(args.out),
+                  plot=plot_path(args), starts=args.starts, exact=args.exact_plant, cases=args.compensation_cases,
+                  jobs=args.jobs, say=_say, show=print)
+    return 0 if ok else 1
 
 
 def _check_compensation_cases(args) -> None:
@@ -428,11 +130,8 @@ def run_imu(args) -> int:
     if args.logs:
         raise InputError("--imu measures on the board: give --port, not LOG files")
 
-    def say(text: str) -> None:
-        print(text, file=sys.stderr, flush=True)
-
     with session_for(args) as s:
-        still, turn = measure(s, user_for(s, args.yes), say)
+        still, turn = measure(s, user_for(s, args.yes), _say)
     try:
         cal = calibrate(still, turn)
     except ValueError as e:
@@ -468,7 +167,7 @@ def run_identify(args) -> int:
     if args.logs:
         # A shell glob such as logs/*.csv also matches the CSV logs' event sidecars: not logs of their own.
         logs = [Path(p) for p in args.logs if not str(p).endswith((".events.csv", ".csv.json"))]
-        return fit_logs(args, logs)
+        return _fit(args, logs)
     return run_port(args)
 
 

@@ -1,0 +1,238 @@
+"""Driving the board through the identification experiments (`rodctl identify --port`): each one
+logged to its own file, the rod at rest before it, a swing past the soft limit stopped and played
+again smaller. The fit of the logs is rodctl.ident.logs.
+
+    from rodctl.ident import run
+    params = run.prepare(session, params)    # the board's counts per turn; every period's telemetry
+    logs = run.run_experiments(session, exps, log_dir, stamp, params, source, limits, scale=1.0,
+                               soft_limit=0.8, settle_s=2.0, confirm=ask, say=say)
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Callable
+
+from rodgains.errors import UserError
+
+REST_RATE_RAD_S = 0.05  # the rod counts as at rest below this base rate ...
+REST_HOLD_S = 0.5  # ... for this long
+REST_TIMEOUT_S = 20.0
+# After the settle move (experiments.settle_move) the rod is near rest; this wait lets what is left
+# of its sway die out before the next record starts (docs/identification.md).
+SETTLE_S = 2.0
+END_MARGIN_S = 3.0  # beyond the experiment's duration before the host gives up waiting
+# The default amplitudes are sized for the nominal rig; a livelier one (softer rod, less back-EMF
+# damping) can swing a chirp into the firmware's 60 deg limit and FAULT: 1 of 30 random rigs, whose
+# steps also reached 56 deg, while the other 29 stayed within 46 deg in every experiment. The host
+# stops an experiment (DISARM, no FAULT) once the swing passes this fraction of the firmware's angle
+# or speed limit (48 deg, 32 rad/s), and plays it again RETRY_SCALE times smaller, at most MAX_TRIES
+# times in all.
+SOFT_LIMIT_FRACTION = 0.8
+RETRY_SCALE = 0.7
+MAX_TRIES = 3
+
+
+def _wait_rest(session, say: Callable[[str], None], settle: float = 0.0) -> None:
+    """`settle` seconds, then until the base holds still (the fit starts every record at rest); a
+    FAULT is reported."""
+    from rodctl.link import protocol as P
+    from rodctl.link.session import reason_text
+
+    if settle > 0:
+        say(f"  letting the rod settle for {settle:g} s")
+        end = time.monotonic() + settle
+        while time.monotonic() < end:
+            session.check()
+            time.sleep(0.05)
+    still_since, deadline = None, time.monotonic() + REST_TIMEOUT_S
+    while time.monotonic() < deadline:
+        session.check()
+        t = session.wait_telemetry(timeout=1.0)
+        if t.mode == P.Mode.FAULT:
+            raise UserError(f"device is in FAULT ({reason_text(t.reason)}): run `rodctl clear-fault` first")
+        if abs(t.base_rate) < REST_RATE_RAD_S:
+            still_since = still_since or time.monotonic()
+            if time.monotonic() - still_since >= REST_HOLD_S:
+                return
+        else:
+            still_since = None
+        time.sleep(0.02)
+    raise UserError(f"the rod did not come to rest within {REST_TIMEOUT_S:g} s (|base rate| < {REST_RATE_RAD_S} rad/s)")
+
+
+class SwingWatch:
+    """Session listener: the largest swing from hanging [rad] and base speed [rad/s] seen in
+    IDENTIFY telemetry, and whether either passed its soft limit (every frame, not only the
+    ones the polling loop happens to read)."""
+
+    def __init__(self, params, fraction: float = SOFT_LIMIT_FRACTION):
+        """fraction: of the firmware's limits [-]; 1 watches without ever stopping (the firmware trips first)."""
+        from rodctl.link import protocol as P
+
+        self._telemetry, self._identify = P.MsgType.TELEMETRY, P.Mode.IDENTIFY
+        self.rad_per_count = params.rad_per_count
+        self.fraction = fraction
+        self.angle_soft_rad = fraction * math.radians(params["safety"]["angle_limit_deg"])
+        self.speed_soft_rad_s = fraction * params["safety"]["speed_limit"]
+        self.angle_rad = 0.0
+        self.speed_rad_s = 0.0
+        self.over = ""  # what passed its soft limit first ("" while nothing has)
+
+    def __call__(self, frame, _host_time_s) -> None:
+        if frame.type != self._telemetry or frame.msg.mode != self._identify:
+            return
+        # the firmware's angle from hanging: the count wrapped to one output turn
+        a = abs(math.remainder(frame.msg.encoder_count * self.rad_per_count, 2.0 * math.pi))
+        w = abs(frame.msg.base_rate)
+        self.angle_rad, self.speed_rad_s = max(self.angle_rad, a), max(self.speed_rad_s, w)
+        if self.fraction >= 1.0:
+            return
+        if not self.over and a > self.angle_soft_rad:
+            self.over = f"swung {math.degrees(a):.0f} deg from hanging (soft limit {math.degrees(self.angle_soft_rad):.0f} deg)"
+        elif not self.over and w > self.speed_soft_rad_s:
+            self.over = f"reached {w:.1f} rad/s (soft limit {self.speed_soft_rad_s:.1f} rad/s)"
+
+
+def run_experiment(session, exp, log_path: Path | None, params, params_source: str, watch: SwingWatch | None = None):
+    """Play one experiment while logging every frame to log_path (None: not logged, the settle move);
+    returns (log path, final telemetry). With a `watch`, the experiment is stopped (DISARM) as soon as
+    watch.over says the swing passed its soft limit."""
+    from rodctl.link import protocol as P
+    from rodctl.logs import LogWriter, device_metadata
+
+    writer = None
+    if log_path is not None:
+        meta = device_metadata(session.hello, port=session.port, params=params, params_source=params_source,
+                               start_unix=session.open_unix)
+        writer = LogWriter(log_path, meta, n=session.hello.n)
+        session.add_listener(writer, replay=False)
+    if watch is not None:
+        session.add_listener(watch, replay=False)
+    ended = "error"
+    try:
+        session.command(exp.command(), what=f"identify {exp.name}")
+        deadline = time.monotonic() + exp.duration + END_MARGIN_S
+        last = session.wait_telemetry(timeout=1.0)
+        started = time.monotonic()
+        seen = False  # telemetry queued before the ACK still shows DISARMED: wait for IDENTIFY first
+        while time.monotonic() < deadline:
+            time.sleep(0.01)
+            session.check()
+            if watch is not None and watch.over:
+                session.disarm()
+                ended = "stopped: " + watch.over
+                time.sleep(0.1)  # the frames already on their way
+                return log_path, session.telemetry
+            if writer is not None:
+                writer.maybe_flush()  # rows reach the file while the rod moves: a crash keeps them
+            last = session.telemetry
+            if last is None:
+                continue
+            seen = seen or last.mode == P.Mode.IDENTIFY
+            if last.mode != P.Mode.IDENTIFY and (seen or time.monotonic() - started > 1.0):
+                break
+        else:
+            ended = "timeout"
+            raise UserError(f"{exp.name}: still in IDENTIFY {END_MARGIN_S:g} s after its end; disarmed")
+        time.sleep(0.1)  # the frames already on their way
+        ended = "fault" if last.mode == P.Mode.FAULT else "done"
+        return log_path, last
+    finally:
+        if ended != "done" and not ended.startswith("stopped"):
+            try:
+                session.disarm()
+            except UserError:
+                pass
+        if watch is not None:
+            session.remove_listener(watch)
+        if writer is not None:
+            session.remove_listener(writer)
+            writer.close({"end": ended, "experiment": exp.describe()})
+
+
+def _settle(session, settle, limits, source: str, log_dir: Path, *, soft_limit: float, settle_s: float,
+            say: Callable[[str], None]) -> None:
+    """Play the settle move (not logged; `limits`: the parameters whose safety limits the watch uses), then
+    wait settle_s seconds and for a still base."""
+    from rodctl.link import protocol as P
+    from rodctl.link.session import reason_text
+
+    watch = SwingWatch(limits, soft_limit)
+    _, last = run_experiment(session, settle, None, limits, source, watch)
+    if last.mode == P.Mode.FAULT:
+        raise UserError(f"settle move: safety limit tripped: {reason_text(last.reason)} ({P.Reason(last.reason).name}); "
+                        f"the motor is stopped (FAULT); the logs so far are in {log_dir}")
+    if watch.over:
+        raise UserError(f"settle move: {watch.over}; motor stopped: is the rod free to swing, and hanging? "
+                        f"The logs so far are in {log_dir}")
+    _wait_rest(session, say, settle_s)
+
+
+def prepare(session, params):
+    """`params` with the board's counts per turn (the board reduces counts with its own, a rig setting;
+    the fit reads them the same way), and the board set to send every period's telemetry (the fit
+    replays every period's duty)."""
+    from rodctl.link.session import hello_counts_per_rev
+
+    h = session.hello
+    board_counts = hello_counts_per_rev(h)
+    if board_counts:
+        params = params.with_counts_per_rev(board_counts)
+    if h.decimation != 1:
+        session.set("telemetry_decimation", 1)
+    return params
+
+
+def run_experiments(session, exps, log_dir: Path, stamp: str, params, source: str, limits, *, scale: float,
+                    soft_limit: float, settle_s: float, confirm: Callable[[str], None],
+                    say: Callable[[str], None]) -> list[Path]:
+    """Play `exps` one after another, each logged to log_dir/identify-<stamp>-<name>.csv; returns the
+    logs of the runs that played to their end. params: the fit's nominal rig (written into each log);
+    limits: the parameters whose safety limits the soft limits are a `soft_limit` fraction of; scale:
+    the --scale the experiments were played at [-] (for the hint after a trip); settle_s: the wait
+    after each settle move [s]. confirm(text) is asked before each experiment moves the motor (it
+    raises to stop); say(text) reports progress."""
+    from rodctl.ident import experiments as E
+    from rodctl.link import protocol as P
+    from rodctl.link.session import reason_text
+
+    logs = []
+    settle = E.settle_move(params)
+    for i, exp in enumerate(exps, 1):
+        for attempt in range(1, MAX_TRIES + 1):
+            # the first record starts from the rod the user hung still; every later one from where
+            # the last experiment left the rig, which the settle move brings back to rest
+            first = i == 1 and attempt == 1
+            _wait_rest(session, say)  # a stopped experiment leaves the rod swinging: the settle move starts from rest
+            confirm(f"[{i}/{len(exps)}] {exp.describe()}" + ("" if first else f"\n  before it, {settle.describe()}"))
+            if not first:
+                _settle(session, settle, limits, source, log_dir, soft_limit=soft_limit, settle_s=settle_s, say=say)
+            path = log_dir / f"identify-{stamp}-{exp.name}{'' if attempt == 1 else f'-{attempt}'}.csv"
+            watch = SwingWatch(limits, soft_limit)
+            path, last = run_experiment(session, exp, path, params, source, watch)
+            if last.mode == P.Mode.FAULT:
+                # a livelier rig than the amplitudes were sized for (softer rod, weaker back-EMF damping)
+                hint = (f"; for smaller swings: --scale {RETRY_SCALE * scale:.2g}"
+                        if last.reason in (P.Reason.ANGLE_LIMIT, P.Reason.SPEED_LIMIT) else "")
+                raise UserError(f"{exp.name}: safety limit tripped: {reason_text(last.reason)} "
+                                f"({P.Reason(last.reason).name}); the motor is stopped (FAULT); log kept: "
+                                f"{path}{hint}")
+            if not watch.over:
+                break
+            # the stopped run's log stays on disk (it is a clean record), but the fit takes the
+            # complete run: the amplitudes were chosen to excite every parameter for its whole length
+            smaller = exp.scaled(torque=RETRY_SCALE)
+            if attempt == MAX_TRIES:
+                raise UserError(f"{exp.name}: {watch.over} at {exp.amplitude * 1e3:.3g} mN m, after "
+                                f"{MAX_TRIES} tries; motor stopped; logs kept in {log_dir}; "
+                                f"for smaller swings: --scale {scale * RETRY_SCALE ** MAX_TRIES:.2g}")
+            say(f"  stopped: {watch.over}; log kept: {path}; playing it again at "
+                f"{smaller.amplitude * 1e3:.3g} mN m ({RETRY_SCALE:g} x)")
+            exp = smaller
+        logs.append(path)
+        say(f"  done: {path} (largest swing {math.degrees(watch.angle_rad):.0f} deg from hanging, "
+            f"{watch.speed_rad_s:.1f} rad/s)")
+    return logs
