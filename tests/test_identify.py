@@ -10,7 +10,7 @@ from functools import lru_cache
 
 import numpy as np
 import pytest
-from rodgains.params import load_params
+from rodgains.params import DEFAULT_PARAMS, load_params
 
 from host_tools import run_rodctl
 from rodctl.build.sil_build import build_sil
@@ -278,10 +278,22 @@ def test_the_rod_the_user_measured_is_the_nominal_whatever_the_board_was_flashed
     file the board's gains came from (which used to win, and put a 12 mm rod's fit 7 x off)."""
     measured = tmp_path / "measured.toml"
     measured.write_text(load_params().with_overrides("rod.thickness=0.012", "rod.length=0.16").to_toml())
-    r = run_rodctl("identify", "--port", "sim://", "--params", str(measured), "--experiment", "release",
+    board = f"sim://?params={DEFAULT_PARAMS}"  # flashed with the default gains
+    r = run_rodctl("identify", "--port", board, "--params", str(measured), "--experiment", "release",
                    "--log-dir", str(tmp_path), "--out", str(tmp_path / "o.toml"), input="", timeout=120)
     assert r.returncode == 2
     assert r.stderr.splitlines()[0].endswith(f"nominal parameters: {measured}"), r.stderr
+
+
+def test_a_virtual_board_is_built_from_the_users_file(tmp_path):
+    """--params / --set build a sim:// board's firmware and plant, as --params' help says: a rehearsal runs
+    the gains the user would flash."""
+    measured = tmp_path / "measured.toml"
+    measured.write_text(load_params().with_overrides("rod.edges=6").to_toml())
+    r = run_rodctl("identify", "--port", "sim://", "--params", str(measured), "--experiment", "release",
+                   "--log-dir", str(tmp_path), "--out", str(tmp_path / "o.toml"), input="", timeout=120)
+    assert r.returncode == 2
+    assert "firmware N=6 at 1000 Hz" in r.stderr.splitlines()[0], r.stderr
 
 
 def test_a_safety_trip_over_sim_keeps_the_log_and_names_the_limit(tmp_path):

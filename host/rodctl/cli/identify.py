@@ -80,12 +80,12 @@ def run_port(args) -> int:
 
 
 def _run_and_fit(args, exps, log_dir: Path, stamp: str) -> int:
-    from rodctl.cli.common import stop_signals
+    from rodctl.cli.common import session_for, stop_signals
     from rodctl.ident import run as RUN
     from rodctl.link.design import design_params
-    from rodctl.link.session import Session
 
-    with stop_signals(), Session(args.port) as session:
+    # a sim:// board is built from --params / --set, as a board would be flashed with them
+    with stop_signals(), session_for(args) as session:
         # the rod the user measured (--params) is the fit's nominal rig, whatever gains the board was
         # flashed with (the records are the duty it played); without it, the board's own file. The
         # soft limits are the board's own, when its file is known.
