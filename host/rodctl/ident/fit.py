@@ -464,7 +464,8 @@ def report_lines(res: FitResult) -> list[str]:
     return out
 
 
-def progress_printer(stream=sys.stderr):
+def progress_printer(stream=None):
+    """A progress callback printing each line to `stream` (default: sys.stderr as it is when called)."""
     def show(text: str) -> None:
-        print(text, file=stream, flush=True)
+        print(text, file=stream or sys.stderr, flush=True)
     return show

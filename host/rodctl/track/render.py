@@ -10,7 +10,6 @@ frames (a camera that drops one repeats the last), and a hand that covers a mark
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
