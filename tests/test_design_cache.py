@@ -133,3 +133,22 @@ def test_a_write_that_fails_midway_leaves_the_old_file_and_no_temporary(tmp_path
     atomic_write(target, b'{"new": 2}\n')
     assert target.read_text() == '{"new": 2}\n'
     assert sorted(p.name for p in target.parent.iterdir()) == ["run.json"]
+
+
+def test_regenerating_writes_only_the_files_that_changed(tmp_path):
+    """rodgains.atomic_file.write_changed (the gains header before a build, the reference pages): a file
+    already holding its text is left alone (its time unchanged, so a firmware build does not redo it)."""
+    import os
+
+    from rodgains.atomic_file import stale, write_changed
+
+    same, old, missing = tmp_path / "same.h", tmp_path / "old.h", tmp_path / "new" / "missing.toml"
+    same.write_text("kept\n")
+    old.write_text("before\n")
+    os.utime(same, (1_000_000_000, 1_000_000_000))
+    files = {same: "kept\n", old: "after\n", missing: "made\n"}
+    assert stale(files) == [old, missing]
+    assert write_changed(files) == [old, missing]
+    assert [f.read_text() for f in files] == ["kept\n", "after\n", "made\n"]
+    assert same.stat().st_mtime == 1_000_000_000
+    assert stale(files) == [] and write_changed(files) == []

@@ -396,7 +396,7 @@ def test_a_case_the_default_design_drops_on_a_hidden_rig_holds_with_the_identifi
 def test_identify_says_how_far_the_identified_rod_is_from_buckling(tmp_path):
     """Rig B's rod above the hub is 0.98 x its clamped buckling length; rig A's 0.91 x, and no matrix case
     takes A past it."""
-    from rodctl.ident.logs import buckling_line
+    from rodctl.ident.fit_logs import buckling_line
 
     b = buckling_line(_identified("B", tmp_path)).splitlines()
     assert b[0].startswith("buckling: the rod above the hub is 0.98") and "it reaches 1 at E -" in b[0]

@@ -29,3 +29,16 @@ def atomic_write(path: str | Path, data: str | bytes) -> Path:
     with replacing(path) as tmp:
         tmp.write_bytes(data.encode() if isinstance(data, str) else data)
     return Path(path)
+
+
+def stale(files: dict[Path, str]) -> list[Path]:
+    """Of generated files ({path: text}), those missing or not holding their text."""
+    return [f for f, text in files.items() if not f.is_file() or f.read_text() != text]
+
+
+def write_changed(files: dict[Path, str]) -> list[Path]:
+    """Write each generated file ({path: text}) that is stale, atomically; returns those written."""
+    written = stale(files)
+    for f in written:
+        atomic_write(f, files[f])
+    return written

@@ -89,7 +89,9 @@ def _icount_tool() -> Path:
 def header_for_edges(n: int | None, out_dir: Path, *overrides: str, name: str | None = None) -> Path:
     """What `rodctl gains --set rod.edges=n [--set ...] --header out_dir/<name>/rod_gains.h` writes (never the
     committed one); n None keeps the default order."""
-    from rodctl.build.header import generated_files, write_changed
+    from rodgains.atomic_file import write_changed
+
+    from rodctl.build.header import generated_files
 
     header = out_dir / (name or f"n{n}") / "rod_gains.h"
     sets = ([f"rod.edges={n}"] if n is not None else []) + list(overrides)

@@ -1,7 +1,7 @@
 """The generated gains header and its parameter copy, for a parameter file and its overrides.
 
     d, files = generated_files("my_rig.toml", ["rod.edges=8"], header=None)   # {path: text}, not written
-    written = write_changed(files)                                              # only what differs
+    written = rodgains.atomic_file.write_changed(files)                         # only what differs
 
 Both files name the command that regenerates them, spelled the same however it was typed.
 """
@@ -52,16 +52,3 @@ def generated_files(params_path: str | None, overrides: Sequence[str], header: s
     target = Path(header) if header else paths.COMMITTED_HEADER
     return d, {target: header_text(d, command), target.with_suffix(".toml"): params_copy_text(p, command)}
 
-
-def stale(files: dict[Path, str]) -> list[Path]:
-    """The generated files ({path: text}) that are missing or differ from what is on disk."""
-    return [f for f, text in files.items() if not f.exists() or f.read_text() != text]
-
-
-def write_changed(files: dict[Path, str]) -> list[Path]:
-    """Write each generated file ({path: text}) that is missing or differs; returns those written."""
-    written = stale(files)
-    for f in written:
-        f.parent.mkdir(parents=True, exist_ok=True)
-        f.write_text(files[f])
-    return written

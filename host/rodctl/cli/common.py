@@ -13,7 +13,7 @@ from pathlib import Path
 
 from rodgains.errors import InputError
 
-from rodctl.link import design, protocol as P
+from rodctl.link import protocol as P
 from rodctl.link.session import Session, is_tty, mode_text
 from rodctl.logs.schema import from_upright_deg
 
@@ -160,15 +160,6 @@ def no_interrupts():
     finally:
         for sig, h in handlers.items():
             signal.signal(sig, h)
-
-
-def open_session(args) -> Session:
-    return session_for(args)
-
-
-def apply_settings(s: Session, assignments: list[str], args=None, out=print, kept: bool = False) -> None:
-    """SET every NAME=VALUE (all or none) and print what the board reports (rodctl.link.design.apply_settings)."""
-    design.apply_settings(s, assignments, args, out=out, kept=kept)
 
 
 def device_port(args) -> str | None:

@@ -10,10 +10,11 @@ import threading
 
 from rodgains.errors import UserError
 
-from rodctl.cli.common import (ARM_CHOICES, RateMeter, add_design_args, add_port_arg, apply_settings, mode_text,
+from rodctl.cli.common import (ARM_CHOICES, RateMeter, add_design_args, add_port_arg, mode_text,
                                session_for, status_text, stop_signals)
 from rodctl.cli.status import status_report
 from rodctl.link import protocol as P
+from rodctl.link.design import apply_settings
 from rodctl.link.session import SETTINGS, Session, is_tty, name_of
 from rodctl.logs.schema import from_upright_deg
 
@@ -104,7 +105,7 @@ def run_console(args) -> int:
                     elif cmd == "set":
                         if not rest:
                             raise UserError(f"set NAME=VALUE (names: {', '.join(SETTINGS)})")
-                        apply_settings(s, rest, args)
+                        apply_settings(s, rest, args, out=print)
                     elif cmd == "status":
                         r = status_report(s, args)
                         th = ", ".join(f"{from_upright_deg(x):+.1f}" for x in r["theta_hat_rad"])

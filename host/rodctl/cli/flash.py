@@ -16,6 +16,7 @@ import sys
 import time
 from pathlib import Path
 
+from rodgains.atomic_file import write_changed
 from rodgains.errors import UserError
 
 from rodctl import paths
@@ -31,7 +32,7 @@ def ensure_header(args) -> None:
     print("checking the gains header against the parameters (designing) ...", file=sys.stderr, flush=True)
     t = time.monotonic()
     d, files = gains_header.generated_files(args.params, args.overrides, None, progress=robust_progress)
-    stale = gains_header.write_changed(files)
+    stale = write_changed(files)
     if stale:
         shown = ", ".join(paths.shown(f) for f in stale)
         print(f"parameters changed: regenerated {shown} (N={d.N}, {1 / d.dt:g} Hz) in {time.monotonic() - t:.1f} s",
@@ -61,7 +62,7 @@ class _Progress:
             sys.stderr.flush()
 
 
-def run_pio(cmd: list[str], project: Path, env: str, what: str, platform: str, verbose: bool) -> None:
+def run_pio_reporting(cmd: list[str], project: Path, env: str, what: str, platform: str, verbose: bool) -> None:
     log = platformio.pio_log(env)
     shown = " ".join(Path(c).name if i == 0 else c for i, c in enumerate(cmd))
     print(f"{what}: {shown}", file=sys.stderr, flush=True)
@@ -101,7 +102,7 @@ def run(args, upload: bool) -> int:
         cmd += ["-t", "upload"]
         if upload_port:
             cmd += ["--upload-port", upload_port]
-    run_pio(cmd, project, args.env, what, name, args.verbose)
+    run_pio_reporting(cmd, project, args.env, what, name, args.verbose)
     if upload:
         print("flashed: the board restarts DISARMED; check it with `rodctl status`")
     return 0

@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from rodgains import atomic_file
 from rodgains.errors import InputError
 from rodgains.params import Params, load_params
 
@@ -94,7 +95,7 @@ def run_gains(args) -> int:
 
         sys.stdout.write("\n".join(report_lines(d)) + "\n")
     if args.check:
-        stale = gains_header.stale(files)
+        stale = atomic_file.stale(files)
         if stale:
             names = ", ".join(str(f) for f in stale)
             print(f"rodctl gains --check: {names} not what the parameters generate; "

@@ -1,6 +1,6 @@
 """rodctl identify: run identification experiments on the board (or fit recorded logs) and write a
 parameter file with the rig's identified motor and rod values. The workflow is rodctl.ident.run (the
-board's experiments) and rodctl.ident.logs (the fit of their logs)."""
+board's experiments) and rodctl.ident.fit_logs (the fit of their logs)."""
 
 from __future__ import annotations
 
@@ -50,7 +50,7 @@ def _say(text: str) -> None:
 
 def run_port(args) -> int:
     from rodctl.ident import experiments as E
-    from rodctl.ident.logs import incomplete_run
+    from rodctl.ident.fit_logs import incomplete_run
 
     if not 0 < args.scale <= 4:
         raise InputError(f"--scale must be in (0, 4], got {args.scale:g}")
@@ -104,7 +104,7 @@ def _run_and_fit(args, exps, log_dir: Path, stamp: str) -> int:
 
 
 def _fit(args, logs: list[Path], params=None, source: str = "") -> int:
-    from rodctl.ident.logs import fit_logs
+    from rodctl.ident.fit_logs import fit_logs
 
     ok = fit_logs(logs, params, source, nominal=lambda meta: _nominal(args, meta), out=Path(args.out),
                   plot=plot_path(args), starts=args.starts, exact=args.exact_plant, cases=args.compensation_cases,

@@ -8,8 +8,8 @@ import time
 from pathlib import Path
 
 from rodctl.cli.gains import add_param_args, params_from_args
-from rodctl.paths import shown
 from rodctl.cli.outputs import check_output
+from rodctl.paths import shown
 
 
 def add_exec_args(p) -> None:
@@ -139,22 +139,8 @@ def run_robustness(args) -> int:
     samples = params["uncertainty"]["samples"] if args.samples is None else args.samples
     written = []
     if args.json:
-        doc = {
-            "command": command_line(sys.argv[1:]),
-            "parameters": params.values,
-            "params_source": params.source,
-            "params_sha256": params.sha256(),
-            "cases": args.cases,
-            "samples": samples,
-            "seed": seed,
-            "seconds": args.seconds,
-            "plant_source": None if plant is None else plant.source,
-            "plant_sha256": None if plant is None else plant.sha256(),
-            "plant_parameters": None if plant is None else plant.values,
-            "score": sc.to_json(),
-            "score_definition": S.__doc__.strip(),
-            "runs": rows,
-        }
+        doc = S.document(params, rows, sc, cases=args.cases, samples=samples, seed=seed, seconds=args.seconds,
+                         command=command_line(sys.argv[1:]), plant=plant)
         written.append(write_json(args.json, doc))
     if args.plot:
         on = "faithful plant" if plant is None else f"rod of {shown(plant.source)}"

@@ -65,7 +65,7 @@ def _outputs(args, name: str, all_mode: bool) -> tuple[Path | None, Path | None]
 
 
 def run_one(args, name: str, params, all_mode: bool = False):
-    from rodctl.sim.scenario_run import check_new_log, run_one as run_scenario
+    from rodctl.sim.scenario_run import check_new_log, run_and_write
 
     plot, log = _outputs(args, name, all_mode)
     for path, flag, figure in ((plot, "--figures" if all_mode else "--plot", True), (log, "--log", False)):
@@ -85,7 +85,7 @@ def run_one(args, name: str, params, all_mode: bool = False):
     if plot is not None and not all_mode and args.plot and not args.force and plot.exists():  # nor an explicit --plot
         raise InputError(f"--plot {plot} exists: choose another file name, or --force to replace it")
     prog = Progress(name)
-    return run_scenario(name, params, plot=plot, log=log, keep_log=keep_log, duration=args.duration,
+    return run_and_write(name, params, plot=plot, log=log, keep_log=keep_log, duration=args.duration,
                         progress=prog, finished=prog.done)
 
 

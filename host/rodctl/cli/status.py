@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import json
 
-from rodctl.cli.common import add_design_args, add_port_arg, apply_settings, session_for, stop_signals
+from rodctl.cli.common import add_design_args, add_port_arg, session_for, stop_signals
 from rodctl.link import protocol as P
-from rodctl.link.design import design_params
+from rodctl.link.design import apply_settings, design_params
 from rodctl.link.session import SETTINGS, Session, hello_settings, name_of, parse_assignment, reason_text, rig_source
 from rodctl.logs.schema import from_upright_deg
 
@@ -101,7 +101,7 @@ def run_set(args) -> int:
     for a in args.assignments:
         parse_assignment(a)
     with stop_signals(), session_for(args) as s:
-        apply_settings(s, args.assignments, args, kept=args.save)
+        apply_settings(s, args.assignments, args, out=print, kept=args.save)
         if args.save:
             now = s.save_rig()
             print(f"stored on the board for every power-on: {rig_text(now)}")

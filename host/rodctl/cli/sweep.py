@@ -6,9 +6,9 @@ import sys
 from pathlib import Path
 
 from rodctl.cli.gains import add_param_args, params_from_args
-from rodctl.paths import shown
 from rodctl.cli.outputs import check_output
 from rodctl.cli.robustness import add_exec_args, add_score_args, check_score_args, command_line
+from rodctl.paths import shown
 
 
 def run_sweep(args) -> int:

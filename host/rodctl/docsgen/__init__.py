@@ -15,6 +15,8 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
+from rodgains import atomic_file
+
 from rodctl import paths
 
 COMMAND = "rodctl docs"
@@ -40,14 +42,9 @@ def generated_files(root: Path | None = None) -> dict[Path, str]:
 
 
 def stale_files(root: Path | None = None) -> list[Path]:
-    return [p for p, text in generated_files(root).items() if not p.is_file() or p.read_text() != text]
+    return atomic_file.stale(generated_files(root))
 
 
 def write_stale(root: Path | None = None) -> list[Path]:
     """Write every page that is missing or differs; returns those written."""
-    files = generated_files(root)
-    written = [p for p, text in files.items() if not p.is_file() or p.read_text() != text]
-    for p in written:
-        p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text(files[p])
-    return written
+    return atomic_file.write_changed(generated_files(root))

@@ -23,7 +23,6 @@ VALIDATION_FRACTION of every record never enters the fit: its percent fit is the
 from __future__ import annotations
 
 import math
-import sys
 import time
 from dataclasses import dataclass, field
 
@@ -462,10 +461,3 @@ def report_lines(res: FitResult) -> list[str]:
             flag = "  not identifiable"
         out.append(f"  {fp.name:22s} {v:11.4g} +- {ci:9.3g} {fp.unit:10s} (nominal {nom:.4g}){flag}")
     return out
-
-
-def progress_printer(stream=None):
-    """A progress callback printing each line to `stream` (default: sys.stderr as it is when called)."""
-    def show(text: str) -> None:
-        print(text, file=stream or sys.stderr, flush=True)
-    return show

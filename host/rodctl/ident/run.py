@@ -1,6 +1,6 @@
 """Driving the board through the identification experiments (`rodctl identify --port`): each one
 logged to its own file, the rod at rest before it, a swing past the soft limit stopped and played
-again smaller. The fit of the logs is rodctl.ident.logs.
+again smaller. The fit of the logs is rodctl.ident.fit_logs.
 
     from rodctl.ident import run
     params = run.prepare(session, params)    # the board's counts per turn; every period's telemetry

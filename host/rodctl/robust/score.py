@@ -130,3 +130,25 @@ def score(rows: list[dict], params: Params) -> Score:
     passed = sum(1 for r in rows if r.get("passed"))
     margin = sum(run_margin(r, limit) for r in rows) / n if n else 0.0
     return Score(passed, n, margin)
+
+
+def document(params: Params, rows: list[dict], sc: Score, *, cases: str, samples: int, seed: int,
+             seconds: float | None, command: str, plant: Params | None = None) -> dict[str, Any]:
+    """What `rodctl robustness --json` writes: the design, the plant it was judged on, the score, its
+    definition and every run."""
+    return {
+        "command": command,
+        "parameters": params.values,
+        "params_source": params.source,
+        "params_sha256": params.sha256(),
+        "cases": cases,
+        "samples": samples,
+        "seed": seed,
+        "seconds": seconds,
+        "plant_source": None if plant is None else plant.source,
+        "plant_sha256": None if plant is None else plant.sha256(),
+        "plant_parameters": None if plant is None else plant.values,
+        "score": sc.to_json(),
+        "score_definition": __doc__.strip(),
+        "runs": rows,
+    }

@@ -362,7 +362,7 @@ def write_trials(study, path: Path) -> None:
 def tuned_file(params: Params, summary: dict, dims: tuple[Dim, ...], reproduce: str, check: str,
                goals: bool = False) -> str:
     """The complete parameter file of the best trial, with comments saying how it came to be."""
-    from rodctl.paths import shown as shown_path
+    from rodctl.paths import shown
 
     best_p = candidate(params, summary["best_values"])
     b, s = summary["best"], summary["start"]
@@ -377,13 +377,13 @@ def tuned_file(params: Params, summary: dict, dims: tuple[Dim, ...], reproduce: 
     ]
     if met:
         lines += [
-            f"# Starting point: {shown_path(params.source)} (sha256 {params.sha256()[:16]}), trial "
+            f"# Starting point: {shown(params.source)} (sha256 {params.sha256()[:16]}), trial "
             f"#{summary['start_number']}: score {sc(s)}",
             f"# Tuned:          trial #{summary['best_number']} of {summary['trials']}: score {sc(b)}",
         ]
     else:
         lines += [
-            f"# Starting point: {shown_path(params.source)} (sha256 {params.sha256()[:16]}), trial "
+            f"# Starting point: {shown(params.source)} (sha256 {params.sha256()[:16]}), trial "
             f"#{summary['start_number']}: not scored",
             f"# NOT TUNED: {unscored_text(summary)}. These are the starting values, unchanged;",
             "# `--no-goals` scores the trials without the nominal goals.",

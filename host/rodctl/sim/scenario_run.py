@@ -60,7 +60,7 @@ def write_log(o, trace, path: Path) -> tuple[Path, Path]:
     return path, truth
 
 
-def run_one(name: str, params: Params, *, plot: Path | None, log: Path | None, keep_log: bool = False,
+def run_and_write(name: str, params: Params, *, plot: Path | None, log: Path | None, keep_log: bool = False,
             duration: float | None = None, progress: Callable[[str, float], None] | None = None,
             finished: Callable[[], None] = lambda: None):
     """Run the scenario `name`, then write its figure `plot` and its log `log` (None: not written).

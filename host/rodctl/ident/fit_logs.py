@@ -2,7 +2,7 @@
 the records of the runs that played to their end, the fit, the friction compensation for the
 identified rig, the verdict, and the parameter file and figure they write.
 
-    from rodctl.ident.logs import fit_logs
+    from rodctl.ident.fit_logs import fit_logs
     ok = fit_logs(paths, nominal=lambda meta: (load_params(), "defaults"), out=Path("my_rod.toml"),
                   plot=Path("my_rod.png"), say=say, show=print)   # True: READY, every value in range
 """
@@ -119,7 +119,7 @@ def fit_logs(logs: list[Path], params=None, source: str = "", *, nominal, out: P
     model = F.fit_model(params, exact=exact)
     own = "the parameter file's [plant]"
     say(f"fit plant: {own if not model else ', '.join(model) + ', then a polish on ' + own}")
-    res = F.fit(records, params, starts=starts, progress=F.progress_printer(), model=model)
+    res = F.fit(records, params, starts=starts, progress=say, model=model)
     show(f"identified in {res.seconds:.1f} s ({res.evaluations} simulations); "
          f"theta_1 residual {res.rms_counts:.2f} counts RMS; validation (held-out {100 * F.VALIDATION_FRACTION:g} %): "
          f"{F.validation_text(res.validation_fit_pct)}")
