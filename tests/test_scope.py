@@ -210,6 +210,10 @@ def test_keys_and_buttons_arm_set_record_and_disarm(tmp_path):
     assert len(log.data) > 300 and "BALANCE" in set(log.data["mode_name"])
     notes = [e for e in log.events["info_text"] if "recording" in e]
     assert notes == ["recording started (scope)", "recording stopped (scope)"]
+    # the same account of the link as `rodctl log` gives: how it ended and every loss counted
+    assert log.trailer["end"] == "scope" and int(log.trailer["frames"]) >= len(log.data)
+    assert {k: log.trailer[k] for k in ("seq_gaps", "crc_errors", "decode_errors", "device_frames_dropped")} == \
+        {"seq_gaps": "0", "crc_errors": "0", "decode_errors": "0", "device_frames_dropped": "0"}
 
 
 

@@ -84,15 +84,8 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
                 c = session.counters()
                 if writer is not None:
                     session.remove_listener(writer)
-                    trailer = {"end": ended, "frames": c["frames"], "seq_gaps": c["seq_gaps"],
-                               "crc_errors": c["crc_errors"], "decode_errors": c["errors"],
-                               "device_frames_dropped": c["device_dropped"],
-                               "device_frames_dropped_since_boot": c["device_dropped_boot"],
-                               "sync_bytes": session.sync_bytes}
-                    if session.disconnected:
-                        trailer["disconnected"] = session.disconnected
                     try:
-                        writer.close(trailer)
+                        writer.close(session.log_trailer(ended))
                     except UserError as e:
                         error = error or e
                     except OSError as e:

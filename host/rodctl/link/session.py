@@ -744,6 +744,17 @@ class Session:
         return hello_settings(self.request_hello())
 
     # --- status -----------------------------------------------------------------------------
+    def log_trailer(self, ended: str) -> dict:
+        """What a log's trailer records of the link when it closes: how it ended ("end", "Ctrl-C",
+        "duration", "error", "scope"), the frames, and every loss the host or the board counted."""
+        c = self.counters()
+        trailer = {"end": ended, "frames": c["frames"], "seq_gaps": c["seq_gaps"], "crc_errors": c["crc_errors"],
+                   "decode_errors": c["errors"], "device_frames_dropped": c["device_dropped"],
+                   "device_frames_dropped_since_boot": c["device_dropped_boot"], "sync_bytes": self.sync_bytes}
+        if self.disconnected:
+            trailer["disconnected"] = self.disconnected
+        return trailer
+
     def counters(self) -> dict[str, int]:
         d = self.decoder
         t = self.telemetry

@@ -189,7 +189,7 @@ class Scope:
             w, self.writer = self.writer, None
             self.s.remove_listener(w)
             w.note("recording stopped (scope)")
-            w.close(self._trailer())
+            w.close(self.s.log_trailer("scope"))
             self.recorded.append(str(w.path))
             self.message = f"recorded {w.path}: {w.rows} frames"
             return
@@ -203,10 +203,6 @@ class Scope:
         self.s.add_listener(self.writer, replay=False)
         self.writer.note("recording started (scope)")
         self.message = f"recording to {path}"
-
-    def _trailer(self) -> dict:
-        c = self.s.counters()
-        return {"end": "scope", "frames": c["frames"], "seq_gaps": c["seq_gaps"], "crc_errors": c["crc_errors"]}
 
     def finish(self) -> None:
         if self.writer is not None:
