@@ -224,3 +224,16 @@ def test_the_matrix_cases_past_the_buckling_length_of_a_rig():
     past = matrix.buckled_cases(hidden_params("B"))
     assert set(past) == {"E-15", "rho+15", "L+3", "E-15,coulomb*0", "rho+15,coulomb*0"}
     assert past["E-15"] == pytest.approx(1.038, abs=1e-3) and past["L+3"] == pytest.approx(1.015, abs=1e-3)
+
+
+def test_the_table_keeps_its_columns_for_the_longest_case_name():
+    from rodctl.cli.robustness import table_lines
+
+    def row(case, task, passed):
+        return {"case": case, "task": task, "passed": passed, "settle_s": None, "final_dev_deg": 2.5}
+
+    rows = [row(c, t, c == "nominal") for c in ("nominal", "rho+15,coulomb*0") for t in matrix.TASKS]
+    lines = table_lines(rows)
+    bars = {tuple(i for i, ch in enumerate(x) if ch == "|") for x in lines}
+    assert len(bars) == 1 and len(next(iter(bars))) == len(matrix.TASKS)  # every '|' in the same column
+    assert lines[3].split("|")[0].strip() == "rho+15,coulomb*0"

@@ -71,10 +71,12 @@ def table_lines(rows: list[dict]) -> list[str]:
         if r.get("kind") != "draw":
             by.setdefault(r["case"], {})[r["task"]] = r
     past = {name: r["buckling_ratio"] for name, d in by.items() for r in d.values() if buckled(r)}
-    lines = [f"  {'':14s}" + "".join(f" | {t:^28s}" for t in TASKS),
-             f"  {'case':14s}" + "".join(f" | {'settle s':>9s} {'end deg':>9s} {'result':>8s}" for _ in TASKS)]
+    names = {name: name + (" ^" if name in past else "") for name in by}
+    w = max([14, *map(len, names.values())])  # the case column as wide as its longest name
+    lines = [f"  {'':{w}s}" + "".join(f" | {t:^28s}" for t in TASKS),
+             f"  {'case':{w}s}" + "".join(f" | {'settle s':>9s} {'end deg':>9s} {'result':>8s}" for _ in TASKS)]
     for name, d in by.items():
-        lines.append(f"  {name + (' ^' if name in past else ''):14s}" + "".join(f" | {cell(d.get(t))}" for t in TASKS))
+        lines.append(f"  {names[name]:{w}s}" + "".join(f" | {cell(d.get(t))}" for t in TASKS))
     draws = [r for r in rows if r.get("kind") == "draw"]
     buckled_draws = len({r["draw"] for r in draws if buckled(r)})
     if draws:
