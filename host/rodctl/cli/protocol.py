@@ -29,9 +29,10 @@ def run_protocol(args) -> int:
         return 0
     from rodctl.cli.outputs import check_output
 
-    for p in gen.generated_files(root):  # every target, before the first is written
+    files = gen.generated_files(root)
+    for p in files:  # every target, before the first is written
         check_output(p, "cannot write", make_parent=True)
-    written = gen.write_files(root)
+    written = gen.write_files(root, files)
     print(f"wrote {', '.join(paths.shown(p, root) for p in written)}")
     return 0
 

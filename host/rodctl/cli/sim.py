@@ -86,12 +86,12 @@ def run_one(args, name: str, params, all_mode: bool = False):
         raise InputError(f"--plot {plot} exists: choose another file name, or --force to replace it")
     prog = Progress(name)
     return run_and_write(name, params, plot=plot, log=log, keep_log=keep_log, duration=args.duration,
-                        progress=prog, finished=prog.done)
+                         progress=prog, finished=prog.done)
 
 
 def check_table_page(readme: Path) -> None:
     """InputError unless `readme` exists, holds the scenario-table markers, and can be rewritten."""
-    from rodctl.sim.scenario_table import TABLE_BEGIN, TABLE_END
+    from rodctl.sim.scenario_table import check_markers
 
     check_output(readme, "--table")
     try:
@@ -100,8 +100,7 @@ def check_table_page(readme: Path) -> None:
         raise InputError(f"--table {readme}: no such file (it needs the scenario-table markers)") from None
     except (OSError, UnicodeDecodeError) as e:
         raise InputError(f"--table {readme}: cannot read it ({getattr(e, 'strerror', None) or e})") from None
-    if TABLE_BEGIN not in text or TABLE_END not in text:
-        raise InputError(f"{readme}: no scenario-table markers ({TABLE_BEGIN!r} ... {TABLE_END!r}) to replace")
+    check_markers(readme, text)
 
 
 def run_sim(args) -> int:

@@ -293,14 +293,14 @@ def stale_files(root: Path) -> list[Path]:
     return [p for p, text in generated_files(root).items() if not p.exists() or p.read_bytes() != text.encode()]
 
 
-def write_files(root: Path) -> list[Path]:
-    """Every generated file, or none: each is written beside its target (rodgains.atomic_file.replacing),
-    and the targets are replaced only once all of them were."""
+def write_files(root: Path, files: dict[Path, str] | None = None) -> list[Path]:
+    """Every generated file (`files`: generated_files(root) when already made), or none: each is written
+    beside its target (rodgains.atomic_file.replacing), and the targets are replaced only once all of them were."""
     from contextlib import ExitStack
 
     from rodgains.atomic_file import replacing
 
-    files = generated_files(root)
+    files = generated_files(root) if files is None else files
     p = None
     try:
         with ExitStack() as stack:

@@ -189,9 +189,12 @@ def point_rows(rows: list[dict], names: list[str], scenario: str, params: Params
     """One verdict per grid point: the run itself, or the score over the point's runs."""
     from rodctl.robust import score as S
 
+    by_point: dict[int, list[dict]] = {}
+    for r in rows:
+        by_point.setdefault(r["point"], []).append(r)
     out = []
-    for i in sorted({r["point"] for r in rows}):
-        sub = [r for r in rows if r["point"] == i]
+    for i in sorted(by_point):
+        sub = by_point[i]
         head = {k: sub[0][k] for k in names}
         if scenario == "score":
             refused = all(r.get("refused") for r in sub)

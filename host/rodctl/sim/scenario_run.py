@@ -61,8 +61,8 @@ def write_log(o, trace, path: Path) -> tuple[Path, Path]:
 
 
 def run_and_write(name: str, params: Params, *, plot: Path | None, log: Path | None, keep_log: bool = False,
-            duration: float | None = None, progress: Callable[[str, float], None] | None = None,
-            finished: Callable[[], None] = lambda: None):
+                  duration: float | None = None, progress: Callable[[str, float], None] | None = None,
+                  finished: Callable[[], None] = lambda: None):
     """Run the scenario `name`, then write its figure `plot` and its log `log` (None: not written).
 
     The caller has checked both paths before the run. keep_log: an existing log is never replaced (an

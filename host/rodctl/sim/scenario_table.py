@@ -39,13 +39,15 @@ def table_markdown(outcomes) -> str:
     return "\n".join(rows) + "\n\nPass criteria:\n\n" + crit + "\n"
 
 
+def check_markers(readme: Path, text: str) -> None:
+    """InputError unless the page's `text` holds both of the table's markers."""
+    if TABLE_BEGIN not in text or TABLE_END not in text:
+        raise InputError(f"{readme}: no scenario-table markers ({TABLE_BEGIN!r} ... {TABLE_END!r}) to replace")
+
+
 def replace_table(readme: Path, table: str) -> None:
     text = readme.read_text() if readme.exists() else ""
-    block = f"{TABLE_BEGIN}\n{table}{TABLE_END}"
-    if TABLE_BEGIN in text and TABLE_END in text:
-        start = text.index(TABLE_BEGIN)
-        end = text.index(TABLE_END) + len(TABLE_END)
-        text = text[:start] + block + text[end:]
-    else:
-        raise InputError(f"{readme}: no scenario-table markers ({TABLE_BEGIN!r} ... {TABLE_END!r}) to replace")
-    readme.write_text(text)
+    check_markers(readme, text)
+    start = text.index(TABLE_BEGIN)
+    end = text.index(TABLE_END) + len(TABLE_END)
+    readme.write_text(text[:start] + f"{TABLE_BEGIN}\n{table}{TABLE_END}" + text[end:])
