@@ -3,22 +3,18 @@
 from __future__ import annotations
 
 import sys
-import time
-
-from rodgains.errors import UserError
 
 from rodctl.cli.common import (ARM_CHOICES, RateMeter, StatusLine, add_design_args, add_port_arg, check_duration,
                                ctrl_c_watch, no_interrupts, session_for, status_text, stop_signals)
 from rodctl.link import protocol as P
-from rodctl.link.design import design_params
+from rodctl.link.attach import Attached, attach
 from rodctl.link.session import Session, name_of
 from rodctl.logs.writer import default_log_name
 
 
 def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> int:
     """Stay attached: optional arm, optional log, a status line, until Ctrl-C / --duration / error."""
-    from rodctl.logs.metadata import device_metadata
-    from rodctl.logs.writer import LogWriter, check_new, log_format, require_format
+    from rodctl.logs.writer import check_new, log_format, require_format
 
     ctrl_c_seen = ctrl_c_watch()
     duration = getattr(args, "duration", None)
@@ -32,64 +28,33 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
 
         check_output(out, "--out", make_parent=True)  # the folder can be written, before the board is touched
     session = session_for(args)
-    writer = None
     status = StatusLine()
     meter = RateMeter()
-    ended = "duration" if duration is not None else "end"
-    error: BaseException | None = None
+
+    def started(a: Attached) -> None:
+        nonlocal meter
+        meter = RateMeter(a.session.frames)
+        h = a.session.hello
+        design = (f"parameters {a.source}" if a.params is not None
+                  else f"parameters unknown (header {bytes(h.header_sha256).hex()[:16]})")
+        target = f" -> {a.writer.path}" if a.writer else ""
+        print(f"{what}: {a.session.port}{target}  (firmware {h.fw_major}.{h.fw_minor}.{h.fw_patch}, N={h.n}, "
+              f"{1e6 / h.period_us:g} Hz, {design}); Ctrl-C stops" + (" and disarms" if arm_mode else ""),
+              file=sys.stderr, flush=True)
+
+    def armed(ack) -> None:
+        print(f"armed {arm_mode.name.lower().replace('_', '-')}: mode {name_of(P.Mode, ack.mode)}",
+              file=sys.stderr, flush=True)
+
+    def tick(a: Attached) -> None:
+        if status.due():
+            status.update(status_text(a.session, meter.rate(a.session.frames), a.writer.rows if a.writer else None))
+
     with stop_signals():
-        try:
-            session.open()
-            meter = RateMeter(session.frames)
-            h = session.hello
-            params, source = design_params(session, args)
-            if out is not None:
-                meta = device_metadata(h, port=session.port, params=params, params_source=source,
-                                       start_unix=session.open_unix)
-                writer = LogWriter(out, meta, n=h.n, fmt=fmt, overwrite=getattr(args, "force", False))
-                session.add_listener(writer, replay=True)
-            design = (f"parameters {source}" if params is not None
-                      else f"parameters unknown (header {bytes(h.header_sha256).hex()[:16]})")
-            target = f" -> {writer.path}" if writer else ""
-            print(f"{what}: {session.port}{target}  (firmware {h.fw_major}.{h.fw_minor}.{h.fw_patch}, N={h.n}, "
-                  f"{1e6 / h.period_us:g} Hz, {design}); Ctrl-C stops" + (" and disarms" if arm_mode else ""),
-                  file=sys.stderr, flush=True)
-            if arm_mode is not None:
-                if ctrl_c_seen():  # a Ctrl-C that something swallowed: never arm after it
-                    raise KeyboardInterrupt
-                ack = session.arm(arm_mode)
-                print(f"armed {arm_mode.name.lower().replace('_', '-')}: mode {name_of(P.Mode, ack.mode)}",
-                      file=sys.stderr, flush=True)
-            t_end = None if duration is None else time.monotonic() + duration
-            while t_end is None or time.monotonic() < t_end:
-                time.sleep(0.05)
-                session.check()
-                if session.listener_error is not None:
-                    e = session.listener_error
-                    raise UserError(f"writing {out} failed: {getattr(e, 'strerror', None) or e}")
-                if writer is not None:
-                    writer.maybe_flush()
-                if status.due():
-                    status.update(status_text(session, meter.rate(session.frames),
-                                              writer.rows if writer else None))
-        except KeyboardInterrupt:
-            ended = "Ctrl-C"
-        except BaseException as e:  # noqa: BLE001 - file first, then the error
-            ended = "error"
-            error = e
-        finally:
-            with no_interrupts():
-                status.end()
-                session.close()  # DISARM when possible; every frame received is in the writer now
-                c = session.counters()
-                if writer is not None:
-                    session.remove_listener(writer)
-                    try:
-                        writer.close(session.log_trailer(ended))
-                    except UserError as e:
-                        error = error or e
-                    except OSError as e:
-                        error = error or UserError(f"closing {writer.path} failed: {e}")
+        a = attach(session, args, out=out, fmt=fmt, overwrite=getattr(args, "force", False),
+                   arm_mode=arm_mode, duration_s=duration, interrupted=ctrl_c_seen, shield=no_interrupts,
+                   started=started, armed=armed, tick=tick, stopping=status.end)
+    writer, c, ended = a.writer, a.counters, a.ended
     if writer is not None:
         print(f"wrote {writer.path}: {writer.rows} telemetry rows, {writer.events} events ({c['frames']} frames); "
               f"seq gaps {c['seq_gaps']}, CRC errors {c['crc_errors']}, device dropped {c['device_dropped']}"
@@ -99,8 +64,8 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
         print(f"{what} ended ({ended}): {c['frames']} frames, seq gaps {c['seq_gaps']}, "
               f"CRC errors {c['crc_errors']}" + _disarm_note(session),
               file=sys.stderr, flush=True)
-    if error is not None:
-        raise error
+    if a.error is not None:
+        raise a.error
     if ended == "Ctrl-C" and session.hello is None:  # before the board answered: nothing armed, nothing written
         print("rodctl: interrupted before the board answered; nothing was armed or written", file=sys.stderr,
               flush=True)

@@ -1,0 +1,114 @@
+"""Staying attached to a board (rodctl log, rodctl arm): open the session, log every frame if asked, arm if asked,
+wait until Ctrl-C, a duration or an error; then disarm, close the log with the link's trailer, count what came.
+
+    a = attach(session, args, out="run.csv", fmt="csv", arm_mode=P.ArmMode.BALANCE, duration_s=10.0,
+               started=say_start, armed=say_armed, tick=show_status, stopping=end_status)
+    a.ended, a.counters, a.writer     # "end" | "duration" | "Ctrl-C" | "error"; the link's counters; the log
+    if a.error is not None:           # kept, not raised: the caller says what was written first
+        raise a.error
+
+Nothing here prints: what the terminal shows goes through the callbacks. Signals are the caller's: a
+KeyboardInterrupt ends the attach as "Ctrl-C", and `shield` may hold further ones off while the board is
+disarmed and the log closed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Callable, ContextManager
+
+from rodgains.errors import UserError
+
+from rodctl.link import protocol as P
+from rodctl.link.design import design_params
+from rodctl.link.session import Session
+
+if TYPE_CHECKING:
+    from rodgains.params import Params
+
+    from rodctl.logs.writer import LogWriter
+
+POLL_S = 0.05  # how often the link, the log and the status are looked at while attached [s]
+
+
+@dataclass
+class Attached:
+    """One attach: its session, its log (None: not logging) and the design the board runs (design_params);
+    once attach() returns, how it ended, the link's counters after the close and the error that ended it."""
+
+    session: Session
+    writer: LogWriter | None = None
+    params: Params | None = None
+    source: str = "unknown"
+    ended: str = "end"
+    counters: dict[str, int] = field(default_factory=dict)
+    error: BaseException | None = None
+
+
+def _nothing(*_args) -> None:
+    pass
+
+
+def attach(session: Session, design_args=None, *, out: str | None = None, fmt: str | None = None,
+           overwrite: bool = False, arm_mode: P.ArmMode | None = None, duration_s: float | None = None,
+           interrupted: Callable[[], bool] = lambda: False,
+           shield: Callable[[], ContextManager] = contextlib.nullcontext,
+           started: Callable[[Attached], None] = _nothing, armed: Callable[[object], None] = _nothing,
+           tick: Callable[[Attached], None] = _nothing, stopping: Callable[[], None] = _nothing) -> Attached:
+    """Open `session` (not yet open), log every frame to `out` (fmt, overwrite: as LogWriter) from the first one
+    on, arm `arm_mode`, and stay until duration_s [s] has passed (None: until Ctrl-C or an error).
+
+    design_args: --params/--set, to name the design the board runs (design_params). started(a) is called once
+    the session is open and the log begun; armed(ack) with the board's ACK of the ARM; tick(a) every POLL_S
+    while attached; stopping() first when it ends, inside `shield()`, before the board is disarmed.
+    interrupted() says whether a Ctrl-C came that something swallowed: then the board is never armed.
+    """
+    from rodctl.logs.metadata import device_metadata
+    from rodctl.logs.writer import LogWriter
+
+    a = Attached(session, ended="duration" if duration_s is not None else "end")
+    try:
+        session.open()
+        h = session.hello
+        a.params, a.source = design_params(session, design_args)
+        if out is not None:
+            meta = device_metadata(h, port=session.port, params=a.params, params_source=a.source,
+                                   start_unix=session.open_unix)
+            a.writer = LogWriter(out, meta, n=h.n, fmt=fmt, overwrite=overwrite)
+            session.add_listener(a.writer, replay=True)
+        started(a)
+        if arm_mode is not None:
+            if interrupted():
+                raise KeyboardInterrupt
+            armed(session.arm(arm_mode))
+        t_end = None if duration_s is None else time.monotonic() + duration_s
+        while t_end is None or time.monotonic() < t_end:
+            time.sleep(POLL_S)
+            session.check()
+            if session.listener_error is not None:
+                e = session.listener_error
+                raise UserError(f"writing {out} failed: {getattr(e, 'strerror', None) or e}")
+            if a.writer is not None:
+                a.writer.maybe_flush()
+            tick(a)
+    except KeyboardInterrupt:
+        a.ended = "Ctrl-C"
+    except BaseException as e:  # noqa: BLE001 - the log closed first, then the error
+        a.ended = "error"
+        a.error = e
+    finally:
+        with shield():
+            stopping()
+            session.close()  # DISARM when possible; every frame received is in the writer now
+            a.counters = session.counters()
+            if a.writer is not None:
+                session.remove_listener(a.writer)
+                try:
+                    a.writer.close(session.log_trailer(a.ended))
+                except UserError as e:
+                    a.error = a.error or e
+                except OSError as e:
+                    a.error = a.error or UserError(f"closing {a.writer.path} failed: {e}")
+    return a
