@@ -101,14 +101,11 @@ def run_experiment(session, exp, log_path: Path | None, params, params_source: s
     returns (log path, final telemetry). With a `watch`, the experiment is stopped (DISARM) as soon as
     watch.over says the swing passed its soft limit."""
     from rodctl.link import protocol as P
-    from rodctl.logs import LogWriter, device_metadata
+    from rodctl.logs.writer import attach_device_log
 
     writer = None
     if log_path is not None:
-        meta = device_metadata(session.hello, port=session.port, params=params, params_source=params_source,
-                               start_unix=session.open_unix)
-        writer = LogWriter(log_path, meta, n=session.hello.n)
-        session.add_listener(writer, replay=False)
+        writer = attach_device_log(session, log_path, params=params, params_source=params_source)
     if watch is not None:
         session.add_listener(watch, replay=False)
     ended = "error"

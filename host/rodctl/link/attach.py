@@ -65,19 +65,15 @@ def attach(session: Session, design_args=None, *, out: str | None = None, fmt: s
     while attached; stopping() first when it ends, inside `shield()`, before the board is disarmed.
     interrupted() says whether a Ctrl-C came that something swallowed: then the board is never armed.
     """
-    from rodctl.logs.metadata import device_metadata
-    from rodctl.logs.writer import LogWriter
+    from rodctl.logs.writer import attach_device_log
 
     a = Attached(session, ended="duration" if duration_s is not None else "end")
     try:
         session.open()
-        h = session.hello
         a.params, a.source = design_params(session, design_args)
         if out is not None:
-            meta = device_metadata(h, port=session.port, params=a.params, params_source=a.source,
-                                   start_unix=session.open_unix)
-            a.writer = LogWriter(out, meta, n=h.n, fmt=fmt, overwrite=overwrite)
-            session.add_listener(a.writer, replay=True)
+            a.writer = attach_device_log(session, out, params=a.params, params_source=a.source, fmt=fmt,
+                                         overwrite=overwrite, replay=True)
         started(a)
         if arm_mode is not None:
             if interrupted():

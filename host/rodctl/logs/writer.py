@@ -290,3 +290,16 @@ class LogWriter:
                 raise InputError(f"closing {self.path} failed: {e.strerror or e}") from None
             self.closed = True
         return self.path
+
+
+def attach_device_log(session, path: str | Path, *, params=None, params_source: str = "unknown", fmt: str | None = None,
+                      overwrite: bool = False, replay: bool = False) -> LogWriter:
+    """A LogWriter for an open Session's board (device_metadata of its HELLO, its edges), added as its listener.
+    replay: also write the frames the session has received so far."""
+    from rodctl.logs.metadata import device_metadata
+
+    meta = device_metadata(session.hello, port=session.port, params=params, params_source=params_source,
+                           start_unix=session.open_unix)
+    writer = LogWriter(path, meta, n=session.hello.n, fmt=fmt, overwrite=overwrite)
+    session.add_listener(writer, replay=replay)
+    return writer

@@ -182,8 +182,7 @@ class Scope:
 
     def toggle_recording(self) -> None:
         from rodctl.link.design import design_params
-        from rodctl.logs.metadata import device_metadata
-        from rodctl.logs.writer import LogWriter, default_log_name, log_format
+        from rodctl.logs.writer import attach_device_log, default_log_name, log_format
 
         if self.writer is not None:
             w, self.writer = self.writer, None
@@ -197,10 +196,8 @@ class Scope:
         fmt = log_format(a.record or "x.csv", a.format) if a.record or a.format else "csv"
         path = a.record if a.record and not self.recorded else default_log_name(fmt)
         params, source = design_params(self.s, a)
-        meta = device_metadata(self.s.hello, port=self.s.port, params=params, params_source=source,
-                               start_unix=self.s.open_unix)
-        self.writer = LogWriter(path, meta, n=self.n, fmt=fmt, overwrite=bool(a.force))
-        self.s.add_listener(self.writer, replay=False)
+        self.writer = attach_device_log(self.s, path, params=params, params_source=source, fmt=fmt,
+                                        overwrite=bool(a.force))
         self.writer.note("recording started (scope)")
         self.message = f"recording to {path}"
 
