@@ -286,145 +286,204 @@ def fit(records: list[Record], params, *, fitted: tuple[str, ...] = NAMES, start
     model: --set overrides of the plant the starts search on (default fit_model(params): the fast rod).
     polish: when that plant is not the parameter file's own, refine the best start on the file's plant
     (what the rig is taken to be); the intervals and the report then come from that plant."""
-    from scipy.optimize import least_squares
-
     check_identifiable(records, params)
     model = fit_model(params) if model is None else tuple(model)
     t0 = time.monotonic()
-    nominal = nominal_values(params)
-    scale = _scales(nominal)
-    fps = [fp for fp in FIT_PARAMS if fp.name in fitted]
-    cpr = float(params.counts_per_rev)
-    q = 2 * math.pi / cpr / math.sqrt(12.0)  # quantization noise of theta_1 [rad]
-    meas = [measured_theta(r, cpr) for r in records]
-    split = [max(1, int(round(len(r.count) * (1 - VALIDATION_FRACTION)))) for r in records]
-    use = [moving_mask(r.count)[:k] for r, k in zip(records, split)]
-    sim = Simulator(records)
-    evals = [0]
-    pg, nr = len(fps), len(records)
-    rows = [int(u.sum()) for u in use]
-    row_of = np.repeat(np.arange(nr), rows)  # the record each residual row comes from
+    problem = FitProblem(records, params, fitted, model)
+    best = best_start(problem, starts, max_nfev, progress)
+    if polish and problem.model:
+        problem.model = ()  # FitProblem.simulate reads it: from here on, the file's own plant
+        if progress:
+            progress("fit: polish on the parameter file's plant")
+        best = problem.solve("polish", best.x, POLISH_NFEV)
+    return fit_result(problem, best, t0)
 
-    def values_of(x) -> dict[str, float]:
-        v = dict(nominal)
-        v.update({fp.name: float(xi) * scale[fp.name] for fp, xi in zip(fps, x[:pg])})
+
+class FitProblem:
+    """The least-squares problem of fit(). Its unknowns x: the fitted parameters in the optimizer's scaled
+    units (value / scale), then where each record starts within its first count [counts, -0.5 to 0.5].
+    Its residual: simulated minus measured theta_1 at the moving samples of each record's fitted part
+    (all but its last VALIDATION_FRACTION), in units of the quantization noise."""
+
+    def __init__(self, records: list[Record], params, fitted: tuple[str, ...], model: tuple[str, ...]):
+        self.records, self.params = records, params
+        self.model = model  # --set overrides of the plant simulated
+        self.nominal = nominal_values(params)
+        self.scale = _scales(self.nominal)
+        self.fitted = [fp for fp in FIT_PARAMS if fp.name in fitted]  # in FIT_PARAMS' order
+        self.n_fitted = len(self.fitted)  # x[:n_fitted] are the parameters, x[n_fitted:] the records' start places
+        self.counts_per_rev = float(params.counts_per_rev)
+        self.noise = 2 * math.pi / self.counts_per_rev / math.sqrt(12.0)  # quantization noise of theta_1 [rad]
+        self.measured = [measured_theta(r, self.counts_per_rev) for r in records]
+        self.split = [max(1, int(round(len(r.count) * (1 - VALIDATION_FRACTION)))) for r in records]
+        self.moving = [moving_mask(r.count)[:k] for r, k in zip(records, self.split)]
+        rows = [int(u.sum()) for u in self.moving]
+        self.row_of = np.repeat(np.arange(len(records)), rows)  # the record each residual row comes from
+        nr = len(records)
+        self.lo = np.array([fp.bounds[0] / self.scale[fp.name] for fp in self.fitted] + [-0.5] * nr)
+        self.hi = np.array([fp.bounds[1] / self.scale[fp.name] for fp in self.fitted] + [0.5] * nr)
+        self.simulator = Simulator(records)
+        self.evaluations = 0  # simulations run
+        self.tried: list[dict] = []  # each solve: where it started, its cost and simulations
+        self._last = (None, None)  # least_squares asks for the Jacobian where it has just evaluated the residual
+
+    def values(self, x: np.ndarray) -> dict[str, float]:
+        """Every FIT_PARAMS value at x (the ones not fitted at their nominal) [unit]."""
+        v = dict(self.nominal)
+        v.update({fp.name: float(xi) * self.scale[fp.name] for fp, xi in zip(self.fitted, x[:self.n_fitted])})
         return v
 
-    def simulate(x) -> list[np.ndarray]:
-        evals[0] += 1
-        return sim.run(with_values(params, values_of(x)).with_overrides(*model), starts=x[pg:])
+    def simulate(self, x: np.ndarray) -> list[np.ndarray]:
+        self.evaluations += 1
+        candidate = with_values(self.params, self.values(x)).with_overrides(*self.model)
+        return self.simulator.run(candidate, starts=x[self.n_fitted:])
 
-    last = [None, None]  # least_squares asks for the Jacobian where it has just evaluated the residual
-
-    def residual(x) -> np.ndarray:
-        if last[0] is not None and np.array_equal(last[0], x):
-            return last[1].copy()
-        th = simulate(x)
-        r = np.concatenate([(s[:k] - m[:k])[u] / q for s, m, k, u in zip(th, meas, split, use)])
-        last[0], last[1] = np.array(x, copy=True), r
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        last_x, last_r = self._last
+        if last_x is not None and np.array_equal(last_x, x):
+            return last_r.copy()
+        th = self.simulate(x)
+        r = np.concatenate([(s[:k] - m[:k])[u] / self.noise
+                            for s, m, k, u in zip(th, self.measured, self.split, self.moving)])
+        self._last = (np.array(x, copy=True), r)
         return r.copy()
 
-    def jacobian(x) -> np.ndarray:
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
         """Forward differences; the records' own start places share one simulation (each moves
         only its own record's rows)."""
-        f0 = residual(x)
+        n, row_of = self.n_fitted, self.row_of
+        f0 = self.residual(x)
         J = np.empty((len(f0), len(x)))
         step = STEP * np.maximum(1.0, np.abs(x))
-        h = np.where(x + step <= hi, step, -step)
-        for j in range(pg):
+        h = np.where(x + step <= self.hi, step, -step)
+        for j in range(n):
             xj = x.copy()
             xj[j] += h[j]
-            J[:, j] = (residual(xj) - f0) / h[j]
+            J[:, j] = (self.residual(xj) - f0) / h[j]
         xs = x.copy()
-        xs[pg:] += h[pg:]
-        d = residual(xs) - f0
-        J[:, pg:] = 0.0
-        J[np.arange(len(f0)), pg + row_of] = d / h[pg + row_of]
+        xs[n:] += h[n:]
+        d = self.residual(xs) - f0
+        J[:, n:] = 0.0
+        J[np.arange(len(f0)), n + row_of] = d / h[n + row_of]
         return J
 
-    # Each record's encoder side starts somewhere in its first count: one unknown per record.
-    lo = np.array([fp.bounds[0] / scale[fp.name] for fp in fps] + [-0.5] * nr)
-    hi = np.array([fp.bounds[1] / scale[fp.name] for fp in fps] + [0.5] * nr)
-    x_nom = np.clip(np.array([nominal[fp.name] / scale[fp.name] for fp in fps] + [0.0] * nr), lo, hi)
-    # Deterministic starts: the nominal point, then every parameter low, then high (rotor and rod
-    # guesses are often off by tens of percent, the friction terms by factors).
-    low, high = x_nom.copy(), x_nom.copy()
-    low[:pg], high[:pg] = x_nom[:pg] * 0.6, x_nom[:pg] * 1.6
-    candidates = [x_nom, np.clip(low, lo, hi), np.clip(high, lo, hi)]
-    tried = []
+    def start_points(self) -> list[np.ndarray]:
+        """Deterministic starts: the nominal point (each record in the middle of its first count), then
+        every parameter low, then high (rotor and rod guesses are often off by tens of percent, the
+        friction terms by factors)."""
+        n, lo, hi = self.n_fitted, self.lo, self.hi
+        x_nom = np.clip(np.array([self.nominal[fp.name] / self.scale[fp.name] for fp in self.fitted]
+                                 + [0.0] * len(self.records)), lo, hi)
+        low, high = x_nom.copy(), x_nom.copy()
+        low[:n], high[:n] = x_nom[:n] * 0.6, x_nom[:n] * 1.6
+        return [x_nom, np.clip(low, lo, hi), np.clip(high, lo, hi)]
 
-    def solve(kind: str, x0, nfev: int):
-        x_scale = np.concatenate([np.maximum(x0[:pg], 0.05), np.full(nr, 0.25)])
-        r = least_squares(residual, x0, jac=jacobian, bounds=(lo, hi), x_scale=x_scale, max_nfev=nfev, method="trf")
-        tried.append({kind: {fp.name: float(a * scale[fp.name]) for fp, a in zip(fps, x0)},
-                      "cost": float(r.cost), "nfev": int(r.nfev)})
+    def solve(self, kind: str, x0: np.ndarray, nfev: int):
+        """scipy.optimize.least_squares from x0 with at most nfev simulations, noted in `tried` as `kind`."""
+        from scipy.optimize import least_squares
+
+        x_scale = np.concatenate([np.maximum(x0[:self.n_fitted], 0.05), np.full(len(self.records), 0.25)])
+        r = least_squares(self.residual, x0, jac=self.jacobian, bounds=(self.lo, self.hi), x_scale=x_scale,
+                          max_nfev=nfev, method="trf")
+        self.tried.append({kind: {fp.name: float(a * self.scale[fp.name]) for fp, a in zip(self.fitted, x0)},
+                           "cost": float(r.cost), "nfev": int(r.nfev)})
         return r
 
+
+def best_start(problem: FitProblem, starts: int, max_nfev: int, progress=None):
+    """The lowest-cost solve of the first `starts` start points (at least one)."""
+    candidates = problem.start_points()
     best = None
     for i, x0 in enumerate(candidates[:max(1, starts)]):
         if progress:
             progress(f"fit: start {i + 1}/{min(starts, len(candidates))}")
-        r = solve("start", x0, max_nfev)
+        r = problem.solve("start", x0, max_nfev)
         if best is None or r.cost < best.cost:
             best = r
-    if polish and model:
-        model = ()  # simulate() reads it: from here on, the file's own plant
-        if progress:
-            progress("fit: polish on the parameter file's plant")
-        best = solve("polish", best.x, POLISH_NFEV)
+    return best
+
+
+def fit_result(problem: FitProblem, best, t0: float) -> FitResult:
+    """The FitResult of the solve `best` (a least_squares result); t0: when the fit began [monotonic s]."""
+    fitted, n, scale = problem.fitted, problem.n_fitted, problem.scale
     x = best.x
     J = np.asarray(best.jac)
     m = J.shape[0]
-    s2 = 2 * best.cost / max(1, m - J.shape[1])
-    # the intervals allow for the records' start places (the whole covariance's block); the
-    # identifiability is the fitted parameters' own
-    cov = (s2 * np.linalg.pinv(J.T @ J))[:pg, :pg]
-    J = J[:, :pg]
-    p = pg
-    jn = np.linalg.norm(J, axis=0)
-    jn_safe = np.where(jn > 0, jn, 1.0)
-    Js = J / jn_safe
-    sv = np.linalg.svd(Js, compute_uv=False)
+    cov = covariance(J, best.cost, n)
+    jn, sv = scaled_sensitivity(J[:, :n])
     sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
     corr = cov / np.outer(np.where(sd > 0, sd, 1), np.where(sd > 0, sd, 1))
-    values = values_of(x)
-    ci = {fp.name: float(1.96 * sd[i] * scale[fp.name]) for i, fp in enumerate(fps)}
-    identifiable, why = {}, {}
-    for i, fp in enumerate(fps):
-        v = values[fp.name]
-        rel = ci[fp.name] / abs(v) if v != 0 else math.inf
-        reasons = []
-        if jn[i] == 0 or jn[i] < 1e-6 * jn.max():
-            reasons.append("theta_1 does not respond to it in these logs")
-        elif rel > UNIDENTIFIABLE_REL_CI:
-            partners = [(fps[j].name, corr[i, j]) for j in range(p) if j != i and abs(corr[i, j]) > CORRELATION_LIMIT]
-            if partners:
-                with_ = ", ".join(f"{n} (r = {r:+.3f})" for n, r in partners)
-                reasons.append(f"95 % interval +-{100 * rel:.0f} % of the value; correlated with {with_}")
-            else:
-                reasons.append(f"95 % interval +-{100 * rel:.0f} % of the value; its effect on theta_1 is "
-                               f"{jn[i] / jn.max():.1e} of the strongest parameter's")
-        identifiable[fp.name] = not reasons
-        why[fp.name] = "; ".join(reasons)
-    out_of_range = {}
-    for fp in fps:
+    values = problem.values(x)
+    ci = {fp.name: float(1.96 * sd[i] * scale[fp.name]) for i, fp in enumerate(fitted)}
+    why = {fp.name: why_not_identifiable(i, fitted, values[fp.name], ci[fp.name], jn, corr)
+           for i, fp in enumerate(fitted)}
+    th = problem.simulate(x)
+    validation_pct, fit_pct = validation_and_fit_pct(problem.measured, th, problem.split)
+    cpr, q = problem.counts_per_rev, problem.noise
+    return FitResult(
+        nominal=problem.nominal, values=values, ci95=ci, fitted=tuple(fp.name for fp in fitted),
+        identifiable={name: not reason for name, reason in why.items()}, why=why,
+        out_of_range=out_of_range(fitted, values), correlation=corr, singular_values=sv,
+        validation_fit_pct=validation_pct,
+        fit_pct=fit_pct, rms_counts=float(np.sqrt(2 * best.cost / m) * q * cpr / (2 * math.pi)),
+        starts=problem.tried, seconds=time.monotonic() - t0, evaluations=problem.evaluations,
+        theta_meas=problem.measured, theta_sim=th, split=problem.split, record_names=[r.name for r in problem.records],
+        period=problem.records[0].period, counts_per_rev=cpr, model=problem.model,
+        start_counts=[float(v) for v in x[n:]])
+
+
+def covariance(J: np.ndarray, cost: float, n: int) -> np.ndarray:
+    """cov = s^2 (J'J)^-1 of the first n unknowns (the fitted parameters) [scaled units^2]."""
+    s2 = 2 * cost / max(1, J.shape[0] - J.shape[1])
+    # the intervals allow for the records' start places (the whole covariance's block); the
+    # identifiability is the fitted parameters' own
+    return (s2 * np.linalg.pinv(J.T @ J))[:n, :n]
+
+
+def scaled_sensitivity(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The norms of J's columns (how strongly theta_1 responds to each parameter) and the singular values
+    of J with its columns scaled to norm 1 (a zero column stays zero)."""
+    jn = np.linalg.norm(J, axis=0)
+    jn_safe = np.where(jn > 0, jn, 1.0)
+    return jn, np.linalg.svd(J / jn_safe, compute_uv=False)
+
+
+def why_not_identifiable(i: int, fitted: list[FitParam], value: float, ci: float, jn: np.ndarray,
+                         corr: np.ndarray) -> str:
+    """Why fitted[i] is not identifiable, or "" when it is. value, ci: its value and
+    95 % half-width [unit]; jn: the column norms of scaled_sensitivity; corr: the parameters' correlation."""
+    rel = ci / abs(value) if value != 0 else math.inf
+    if jn[i] == 0 or jn[i] < 1e-6 * jn.max():
+        return "theta_1 does not respond to it in these logs"
+    if not rel > UNIDENTIFIABLE_REL_CI:  # not `<=`: a NaN interval is no reason
+        return ""
+    partners = [(fitted[j].name, corr[i, j]) for j in range(len(fitted))
+                if j != i and abs(corr[i, j]) > CORRELATION_LIMIT]
+    if partners:
+        with_ = ", ".join(f"{n} (r = {r:+.3f})" for n, r in partners)
+        return f"95 % interval +-{100 * rel:.0f} % of the value; correlated with {with_}"
+    return (f"95 % interval +-{100 * rel:.0f} % of the value; its effect on theta_1 is "
+            f"{jn[i] / jn.max():.1e} of the strongest parameter's")
+
+
+def out_of_range(fitted: list[FitParam], values: dict[str, float]) -> dict[str, str]:
+    """The fitted values outside their parameter's physical range, in words (flagged, not written)."""
+    out = {}
+    for fp in fitted:
         lo_p, hi_p = fp.physical
         v = values[fp.name]
         if not lo_p <= v <= hi_p:
-            out_of_range[fp.name] = f"{v:.4g} {fp.unit} is outside the physical range [{lo_p:g}, {hi_p:g}]"
-    th = simulate(x)
+            out[fp.name] = f"{v:.4g} {fp.unit} is outside the physical range [{lo_p:g}, {hi_p:g}]"
+    return out
+
+
+def validation_and_fit_pct(meas: list[np.ndarray], sim: list[np.ndarray], split: list[int]) -> tuple[float, float]:
+    """percent_fit of the records' held-out ends together (the validation), and of their fitted parts."""
     val_m = np.concatenate([mm[k:] for mm, k in zip(meas, split)])
-    val_s = np.concatenate([ss[k:] for ss, k in zip(th, split)])
+    val_s = np.concatenate([ss[k:] for ss, k in zip(sim, split)])
     fit_m = np.concatenate([mm[:k] for mm, k in zip(meas, split)])
-    fit_s = np.concatenate([ss[:k] for ss, k in zip(th, split)])
-    return FitResult(
-        nominal=nominal, values=values, ci95=ci, fitted=tuple(fp.name for fp in fps), identifiable=identifiable,
-        why=why, out_of_range=out_of_range, correlation=corr, singular_values=sv,
-        validation_fit_pct=percent_fit(val_m, val_s),
-        fit_pct=percent_fit(fit_m, fit_s), rms_counts=float(np.sqrt(2 * best.cost / m) * q * cpr / (2 * math.pi)),
-        starts=tried, seconds=time.monotonic() - t0, evaluations=evals[0], theta_meas=meas, theta_sim=th,
-        split=split, record_names=[r.name for r in records], period=records[0].period, counts_per_rev=cpr,
-        model=model, start_counts=[float(v) for v in x[pg:]])
+    fit_s = np.concatenate([ss[:k] for ss, k in zip(sim, split)])
+    return percent_fit(val_m, val_s), percent_fit(fit_m, fit_s)
 
 
 def identifiability_text(res: FitResult) -> list[str]:

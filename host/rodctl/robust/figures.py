@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -38,14 +39,7 @@ HEAT_SPAN = (0.15, 0.85)  # the part of the colour map a cell uses: its ends are
 
 def heatmap(rows: list[dict], path: Path, title: str) -> Path:
     """heatmap_figure, written to `path` (PNG, or the format of its extension)."""
-    import matplotlib.pyplot as plt
-
-    fig = heatmap_figure(rows, title)
-    path = Path(path)
-    with replacing(path) as tmp:
-        fig.savefig(tmp, dpi=130, format=path.suffix.lstrip(".") or "png")
-    plt.close(fig)
-    return path
+    return _write(heatmap_figure(rows, title), path)
 
 
 def heatmap_figure(rows: list[dict], title: str):
@@ -122,75 +116,150 @@ def frontier_figure(rows: list[dict], x: str, y: str | None, path: Path, title: 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from rodctl.robust.sweep import frontier
-
-    xs = sorted({r[x] for r in rows})
+    cols = _columns(rows, x)
     ys = sorted({r[y] for r in rows}) if y else [None]
-    # an evenly spaced numeric axis is drawn to scale; anything else (strings, 5,10,20) one column per value
+    shade = _shading(rows, color_key)
+    fig, ax = plt.subplots(figsize=(8.0, 2.0 + 0.45 * len(ys)))
+    for r in rows:
+        _draw_point(ax, r, (cols.at(r[x]), ys.index(r[y]) if y else 0), cols.width, shade)
+    if y and not isinstance(cols.values[0], str):
+        _draw_frontier(ax, rows, x, y, ys, cols)
+    marked = critical_length_m is not None and x == "rod.length" and cols.numeric
+    if marked:
+        _mark_critical_length(ax, critical_length_m, len(ys))
+    _frame(ax, cols, x, y, ys, marked)
+    sm = matplotlib.cm.ScalarMappable(cmap=shade.cmap, norm=matplotlib.colors.Normalize(0, shade.vmax))
+    fig.colorbar(sm, ax=ax, label=color_label, pad=0.02)
+    if marked:
+        _critical_ratio_axis(ax, critical_length_m)
+    legend = ("black bar: frontier (largest passing, no failure below); x: fail; R: design refused"
+              + ("" if shade.graded else "; green: passed, never within 1 deg"))
+    ax.set_title(title + "\n" + legend, fontsize=8)
+    fig.tight_layout()
+    return _write(fig, path, bbox_inches="tight")
+
+
+@dataclass(frozen=True)
+class _Columns:
+    """The x values across the frontier figure: an evenly spaced numeric axis is drawn to scale, anything
+    else (strings, 5,10,20) one column per value."""
+
+    values: list  # sorted
+    numeric: bool  # drawn to scale
+    width: float  # of a column [x units when numeric, else 1]
+    index: dict  # value -> its column when not to scale
+
+    def at(self, v) -> float:
+        """The centre of v's column on the figure's x axis."""
+        return v if self.numeric else self.index[v]
+
+
+def _columns(rows: list[dict], x: str) -> _Columns:
+    xs = sorted({r[x] for r in rows})
     steps = np.diff(np.asarray(xs, dtype=float)) if not isinstance(xs[0], str) and len(xs) > 1 else np.array([])
     numeric = not isinstance(xs[0], str) and (len(xs) == 1 or bool(np.allclose(steps, steps[0])))
     dx = float(steps[0]) if numeric and len(xs) > 1 else 1.0
-    fig, ax = plt.subplots(figsize=(8.0, 2.0 + 0.45 * len(ys)))
-    # the score colours every point; a run metric only the runs that passed
-    graded = color_key == "score"
-    vals = [r.get(color_key) for r in rows if (graded or r.get("passed")) and r.get(color_key) is not None]
+    return _Columns(xs, numeric, dx, {v: i for i, v in enumerate(xs)})
+
+
+@dataclass(frozen=True)
+class _Shading:
+    """How a grid point's `key` colours its cell."""
+
+    key: str
+    graded: bool  # the score: it colours every point, a run metric only the runs that passed
+    cmap: object
+    vmax: float  # the top of the colour scale [key's unit]
+
+    def colour(self, value: float):
+        return self.cmap(value / self.vmax if self.vmax else 0)
+
+
+def _shading(rows: list[dict], key: str) -> _Shading:
+    import matplotlib
+
+    graded = key == "score"
+    vals = [r.get(key) for r in rows if (graded or r.get("passed")) and r.get(key) is not None]
     vmax = 1.0 if graded or not vals else max(vals)
     # lighter is better in both: a short settle time, a high score
-    cmap = matplotlib.colormaps["viridis" if graded else "viridis_r"]
-    xi = {v: i for i, v in enumerate(xs)}
-    for r in rows:
-        cx = r[x] if numeric else xi[r[x]]
-        cy = ys.index(r[y]) if y else 0
-        if r.get("refused"):
-            ax.add_patch(plt.Rectangle((cx - dx / 2, cy - 0.5), dx, 1, color="#bdbdbd"))
-            ax.text(cx, cy, "R", ha="center", va="center", fontsize=7, color="#555555")
-        elif graded and r.get(color_key) is not None:
-            ax.add_patch(plt.Rectangle((cx - dx / 2, cy - 0.5), dx, 1, color=cmap(r[color_key] / vmax if vmax else 0)))
-            ax.text(cx, cy, f"{r[color_key]:.2f}", ha="center", va="center", fontsize=6,
-                    color="white" if r[color_key] < 0.55 else "black")
-        elif r.get("passed") and r.get(color_key) is not None:
-            ax.add_patch(plt.Rectangle((cx - dx / 2, cy - 0.5), dx, 1, color=cmap(r[color_key] / vmax if vmax else 0)))
-        elif r.get("passed"):  # passed its criterion without settling to 1 deg
-            ax.add_patch(plt.Rectangle((cx - dx / 2, cy - 0.5), dx, 1, color="#c8e6c9"))
-            ax.text(cx, cy, "pass", ha="center", va="center", fontsize=6, color="#2e7d32")
-        else:
-            ax.add_patch(plt.Rectangle((cx - dx / 2, cy - 0.5), dx, 1, color="#fbe9e7"))
-            ax.plot([cx], [cy], marker="x", color="#c62828", ms=7, mew=1.5)
-    if y and not isinstance(xs[0], str):
-        fr = frontier(rows, x, y)
-        fx = [(fr[v] if numeric else xi[fr[v]]) + dx / 2 if fr[v] is not None else None for v in ys]
-        for i, v in enumerate(fx):
-            if v is not None:
-                ax.plot([v, v], [i - 0.5, i + 0.5], color="black", lw=2.2)
-    if critical_length_m is not None and x == "rod.length" and numeric:
-        ax.axvline(critical_length_m, color="black", ls="--", lw=1)
-        ax.text(critical_length_m, len(ys) - 0.45, f" continuum critical length {critical_length_m * 100:.2f} cm",
-                fontsize=7, va="bottom", clip_on=True)
-    if numeric:
-        ax.set_xlim(xs[0] - dx / 2, xs[-1] + dx / 2)
+    return _Shading(key, graded, matplotlib.colormaps["viridis" if graded else "viridis_r"], vmax)
+
+
+def _draw_point(ax, row: dict, centre: tuple[float, float], width: float, shade: _Shading) -> None:
+    """One grid point's cell: grey R (refused), its score, its colour (passed), green "pass" (passed
+    without settling to 1 deg), or a red cross (failed)."""
+    cx, cy = centre
+    value = row.get(shade.key)
+    if row.get("refused"):
+        _cell(ax, centre, width, "#bdbdbd")
+        ax.text(cx, cy, "R", ha="center", va="center", fontsize=7, color="#555555")
+    elif shade.graded and value is not None:
+        _cell(ax, centre, width, shade.colour(value))
+        ax.text(cx, cy, f"{value:.2f}", ha="center", va="center", fontsize=6,
+                color="white" if value < 0.55 else "black")
+    elif row.get("passed") and value is not None:
+        _cell(ax, centre, width, shade.colour(value))
+    elif row.get("passed"):
+        _cell(ax, centre, width, "#c8e6c9")
+        ax.text(cx, cy, "pass", ha="center", va="center", fontsize=6, color="#2e7d32")
     else:
-        ax.set_xlim(-0.5, len(xs) - 0.5)
-        ax.set_xticks(range(len(xs)))
-        ax.set_xticklabels(xs)
-    marked = critical_length_m is not None and x == "rod.length" and numeric
+        _cell(ax, centre, width, "#fbe9e7")
+        ax.plot([cx], [cy], marker="x", color="#c62828", ms=7, mew=1.5)
+
+
+def _cell(ax, centre: tuple[float, float], width: float, color) -> None:
+    import matplotlib.pyplot as plt
+
+    cx, cy = centre
+    ax.add_patch(plt.Rectangle((cx - width / 2, cy - 0.5), width, 1, color=color))
+
+
+def _draw_frontier(ax, rows: list[dict], x: str, y: str, ys: list, cols: _Columns) -> None:
+    """A black bar, for each y, at the right edge of the frontier's column (none where nothing passed)."""
+    from rodctl.robust.sweep import frontier
+
+    fr = frontier(rows, x, y)
+    fx = [cols.at(fr[v]) + cols.width / 2 if fr[v] is not None else None for v in ys]
+    for i, v in enumerate(fx):
+        if v is not None:
+            ax.plot([v, v], [i - 0.5, i + 0.5], color="black", lw=2.2)
+
+
+def _mark_critical_length(ax, length_m: float, n_rows: int) -> None:
+    ax.axvline(length_m, color="black", ls="--", lw=1)
+    ax.text(length_m, n_rows - 0.45, f" continuum critical length {length_m * 100:.2f} cm",
+            fontsize=7, va="bottom", clip_on=True)
+
+
+def _frame(ax, cols: _Columns, x: str, y: str | None, ys: list, marked: bool) -> None:
+    """Limits, ticks and labels; a critical length mark gets half a row above the grid for its words."""
+    if cols.numeric:
+        ax.set_xlim(cols.values[0] - cols.width / 2, cols.values[-1] + cols.width / 2)
+    else:
+        ax.set_xlim(-0.5, len(cols.values) - 0.5)
+        ax.set_xticks(range(len(cols.values)))
+        ax.set_xticklabels(cols.values)
     ax.set_ylim(-0.5, len(ys) - 0.5 + (0.5 if marked else 0))
     ax.set_yticks(range(len(ys)))
     ax.set_yticklabels([str(v) for v in ys] if y else [""])
     ax.set_xlabel(x)
     if y:
         ax.set_ylabel(y)
-    sm = matplotlib.cm.ScalarMappable(cmap=cmap, norm=matplotlib.colors.Normalize(0, vmax))
-    fig.colorbar(sm, ax=ax, label=color_label, pad=0.02)
-    if marked:
-        top = ax.secondary_xaxis("top", functions=(lambda v: v / critical_length_m, lambda r: r * critical_length_m))
-        top.set_xlabel("length / continuum critical length", fontsize=8)
-        top.tick_params(labelsize=7)
-    legend = ("black bar: frontier (largest passing, no failure below); x: fail; R: design refused"
-              + ("" if graded else "; green: passed, never within 1 deg"))
-    ax.set_title(title + "\n" + legend, fontsize=8)
-    fig.tight_layout()
+
+
+def _critical_ratio_axis(ax, length_m: float) -> None:
+    """A top axis in units of the continuum critical length."""
+    top = ax.secondary_xaxis("top", functions=(lambda v: v / length_m, lambda r: r * length_m))
+    top.set_xlabel("length / continuum critical length", fontsize=8)
+    top.tick_params(labelsize=7)
+
+
+def _write(fig, path: Path, **savefig) -> Path:
+    """The figure to `path` (PNG, or the format of its extension), replacing any file there; closes it."""
+    import matplotlib.pyplot as plt
+
     path = Path(path)
     with replacing(path) as tmp:
-        fig.savefig(tmp, dpi=130, bbox_inches="tight", format=path.suffix.lstrip(".") or "png")
+        fig.savefig(tmp, dpi=130, format=path.suffix.lstrip(".") or "png", **savefig)
     plt.close(fig)
     return path
