@@ -540,3 +540,16 @@ def test_held_out_data_that_holds_still_is_said_so_not_nan():
     assert validation_text(percent_fit(still, still)) == "none: the held-out data does not move"
     moving = np.sin(np.linspace(0, 6, 200))
     assert validation_text(percent_fit(moving, 0.99 * moving)) == "99.0 % fit"
+
+
+def test_the_polish_simulates_the_files_plant_where_the_search_left_off():
+    """The polish starts where the search on the fast rod ended: its first residual must be the file's plant's,
+    not the fast rod's last one handed back by the residual's cache."""
+    p = load_params()
+    problem = F.FitProblem(list(records("A")), p, F.NAMES, F.fit_model(p))
+    x = problem.start_points()[0]
+    fast = problem.residual(x)
+    problem.use_plant(())
+    own = problem.residual(x)
+    assert problem.evaluations == 2
+    assert np.abs(own - fast).max() > 0.1  # quantization noise units: the two plants differ

@@ -292,7 +292,7 @@ def fit(records: list[Record], params, *, fitted: tuple[str, ...] = NAMES, start
     problem = FitProblem(records, params, fitted, model)
     best = best_start(problem, starts, max_nfev, progress)
     if polish and problem.model:
-        problem.model = ()  # FitProblem.simulate reads it: from here on, the file's own plant
+        problem.use_plant(())  # from here on, the file's own plant
         if progress:
             progress("fit: polish on the parameter file's plant")
         best = problem.solve("polish", best.x, POLISH_NFEV)
@@ -326,6 +326,12 @@ class FitProblem:
         self.evaluations = 0  # simulations run
         self.tried: list[dict] = []  # each solve: where it started, its cost and simulations
         self._last = (None, None)  # least_squares asks for the Jacobian where it has just evaluated the residual
+
+    def use_plant(self, model: tuple[str, ...]) -> None:
+        """Simulate on the parameter file's plant with these --set overrides from now on. The residual last
+        evaluated was another plant's: a solve starting where it ended must not be handed it back."""
+        self.model = model
+        self._last = (None, None)
 
     def values(self, x: np.ndarray) -> dict[str, float]:
         """Every FIT_PARAMS value at x (the ones not fitted at their nominal) [unit]."""
