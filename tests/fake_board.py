@@ -7,6 +7,7 @@ firmware never would, and records every frame the host sent, with its arrival ti
 
 from __future__ import annotations
 
+import collections
 import os
 import threading
 import time
@@ -24,7 +25,9 @@ class FakeBoard:
         self.received: list[tuple[float, P.Frame]] = []  # (monotonic time, frame from the host)
         self.mode = P.Mode.DISARMED
         self.inject: list[bytes] = []  # raw wire frames to send before the next telemetry
+        self.before_arm_ack: list[bytes] = []  # raw wire frames to send just before the next ARM's ACK
         self.telemetry_sent = 0
+        self.telemetry_by_mode: collections.Counter = collections.Counter()  # telemetry sent, by the mode it reported
         self._seq = 0
         self._stop = threading.Event()
         self._lock = threading.Lock()
@@ -87,6 +90,8 @@ class FakeBoard:
                     continue
                 if f.type == P.MsgType.ARM:
                     self.mode = P.Mode.SWING_UP
+                    while self.before_arm_ack:
+                        self._write(self.before_arm_ack.pop(0))
                 elif f.type == P.MsgType.DISARM:
                     self.mode = P.Mode.DISARMED
                 self._send(P.Ack(command=f.type, result=P.AckResult.OK, command_seq=f.seq, mode=self.mode))
@@ -97,7 +102,9 @@ class FakeBoard:
         while not self._stop.wait(self.period):
             while self.inject:
                 self._write(self.inject.pop(0))
-            self._send(P.Telemetry(mode=self.mode, reason=0, flags=4, n=2, encoder_count=0, base_rate=0.0,
+            mode = self.mode
+            self._send(P.Telemetry(mode=mode, reason=0, flags=4, n=2, encoder_count=0, base_rate=0.0,
                                    torque=0.0, duty=0.0, step_us=50, overruns=0, frames_dropped=0, rx_errors=0,
                                    theta_hat=(0.0, 0.0), rate_hat=(0.0, 0.0)))
             self.telemetry_sent += 1
+            self.telemetry_by_mode[mode] += 1

@@ -3,6 +3,7 @@ seed corpus clean, and the corpus is what tests/fuzz/make_corpus.py writes."""
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import sys
@@ -39,3 +40,9 @@ def test_fuzz_target_runs_the_seed_corpus_under_sanitizers(tmp_path):
     run = subprocess.run([str(exe), "-runs=0", str(FUZZ / "corpus")], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-3000:]
     assert "runtime error" not in run.stderr
+    # What libFuzzer read, and what it ran: every committed seed once, after the empty input it always tries first.
+    committed = len([p for p in (FUZZ / "corpus").iterdir() if p.is_file()])
+    loaded = re.search(r"^INFO: seed corpus: files: (\d+) ", run.stderr, re.M)
+    done = re.search(r"^Done (\d+) runs in ", run.stderr, re.M)
+    assert loaded and done, run.stderr[-3000:]
+    assert (int(loaded[1]), int(done[1])) == (committed, committed + 1)

@@ -167,6 +167,7 @@ def _xvfb() -> bool:
 
 @pytest.mark.skipif(not _xvfb(), reason="needs xvfb-run and tkinter")
 def test_live_plot_runs_in_a_window_under_a_virtual_display():
+    import re
     import subprocess
 
     env = rodctl_env(MPLBACKEND="TkAgg")  # the window tkinter (checked above) makes, whatever else is installed
@@ -174,6 +175,12 @@ def test_live_plot_runs_in_a_window_under_a_virtual_display():
                         "--duration", "2"], capture_output=True, text=True, timeout=120, env=env)
     assert r.returncode == 0, r.stderr
     assert "Traceback" not in r.stderr
+    # The start line comes only when the window is about to show (run_window's ready); Xvfb may add lines of its own.
+    lines = r.stderr.splitlines()
+    assert any(re.fullmatch(r"scope: sim:// \(firmware \d+\.\d+\.\d+, N=\d+\); keys: s swing-up, b balance, "
+                            r"d disarm, c clear fault, r record, q quit; closing the window disarms", line)
+               for line in lines), r.stderr
+    assert lines[-1] == "scope ended: disarmed", r.stderr
 
 
 def test_help_texts_print_their_percent_signs_once():

@@ -5,6 +5,7 @@ DISARM goes out and the command exits non-zero."""
 from __future__ import annotations
 
 import os
+import re
 import time
 
 import pytest
@@ -13,6 +14,7 @@ from fake_board import FakeBoard
 from rodgains.errors import UserError
 
 from rodctl import cli
+from rodctl.cli import record
 from rodctl.link import protocol as P
 from rodctl.link.session import Session
 
@@ -53,11 +55,37 @@ def test_short_telemetry_from_the_board_is_counted_and_the_session_goes_on():
     assert board.times_of(P.MsgType.DISARM)  # closing disarmed it
 
 
-def test_arm_command_keeps_going_over_a_short_frame(capsys):
-    with FakeBoard() as board:
-        board.inject += [board.short_telemetry(b"")]
+def test_arm_command_keeps_going_over_a_short_frame(monkeypatch, capsys):
+    sessions = []  # the command's session, to read what its decoder counted
+    real_session_for = record.session_for
+
+    def session_for(args, **kw):
+        sessions.append(real_session_for(args, **kw))
+        return sessions[-1]
+
+    monkeypatch.setattr(record, "session_for", session_for)
+    board = FakeBoard()
+    # Right before the ARM's ACK, so that it arrives inside the session (frames queued before the port opened
+    # are flushed) and the command's arming depends on the frame after it. Made before the board runs: its
+    # sequence number goes by before the session, so only a frame lost after it would show as a gap.
+    board.before_arm_ack.append(board.short_telemetry(b""))
+    with board:
         assert cli.main(["arm", "--swing-up", "--duration", "1", "--port", board.path]) == 0
     assert board.times_of(P.MsgType.DISARM)
+    s = sessions[0]
+    assert (s.decoder.length_errors, s.counters()["errors"]) == (1, 1)  # received in the session, and skipped
+    lines = capsys.readouterr().err.splitlines()
+    assert "armed swing-up: mode SWING_UP" in lines  # the ACK right after the short frame
+    end = re.fullmatch(r"arm ended \(duration\): (\d+) frames, seq gaps 0, CRC errors 0; disarmed", lines[-1])
+    assert end, lines
+    # The telemetry sent while armed follows the short frame and precedes the DISARM's ACK, which arrived
+    # ("disarmed"), so the command counted all of it, with the two ACKs: at least armed + 1, as one telemetry
+    # can race each mode change. About 100 in the 1 s on an idle machine; the bound holds however late the
+    # board's thread ran. And no more frames than the board sent.
+    armed = board.telemetry_by_mode[P.Mode.SWING_UP]
+    answers = len(board.received) - len(board.times_of(P.MsgType.HEARTBEAT))  # an ACK each
+    answers += len(board.times_of(P.MsgType.HELLO_REQUEST))  # and a HELLO
+    assert armed + 1 <= int(end[1]) <= board.telemetry_sent + answers
 
 
 def test_when_the_reader_stops_heartbeats_stop_disarm_goes_out_and_the_command_fails(monkeypatch, capsys):

@@ -9,6 +9,7 @@ from __future__ import annotations
 import ctypes
 import math
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -151,6 +152,14 @@ def test_abi_checks(standin):
         run_closed_loop(Plant(P, edges=5), ctl, 10, delay_periods=2)
 
 
-def test_realtime_factor_measurement_runs(standin):
+def test_realtime_factor_measurement_runs(standin, monkeypatch):
+    # A faked clock makes the factors exact whatever the machine's load; the iterator also fails the
+    # test if the measurement reads the clock more than twice per repeat.
+    clock = iter([0.0, 0.1, 1.0, 1.2])
+    monkeypatch.setattr(sim, "time", SimpleNamespace(perf_counter=clock.__next__))
     r = measure_realtime_factor(Plant(P, edges=5), standin, seconds=0.2, repeats=2)
-    assert r["factor"] > 0 and len(r["factors"]) == 2 and r["periods"] == 200
+    assert r["periods"] == 200
+    # 0.2 simulated s in 0.1 and 0.2 faked wall s; the median of two is their mean.
+    assert r["factors"] == pytest.approx([2.0, 1.0], rel=1e-12)
+    assert r["factor"] == pytest.approx(1.5, rel=1e-12)
+    assert r["us_per_period"] == pytest.approx(1e3 / 1.5, rel=1e-12)
