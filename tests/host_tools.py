@@ -1,4 +1,5 @@
-"""Helpers for the host tests: run rodctl as a user would, start `rodctl sim-device --pty`, watch a port.
+"""Helpers for the host tests: run rodctl as a user would, start `rodctl sim-device --pty`, watch a port, find
+the build tools (one policy for a missing one: see tool()).
 
 Not a test module. No mocks: every helper runs the real rodctl code against the virtual board
 (sim:// in-process or `rodctl sim-device` in another process on a pseudo-terminal).
@@ -7,11 +8,14 @@ Not a test module. No mocks: every helper runs the real rodctl code against the 
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
 from contextlib import contextmanager
+
+import pytest
 
 from rodctl.link import protocol as P
 
@@ -19,20 +23,41 @@ RODCTL = [sys.executable, "-m", "rodctl.cli"]
 
 
 def rodctl_env(**extra) -> dict:
+    """The environment of a rodctl the test starts: this one's, with no window and no debug tracebacks unless the
+    test asks for them in `extra`. A user's MPLBACKEND or desktop session (DISPLAY, WAYLAND_DISPLAY) would
+    otherwise decide whether a plot opens a window or writes a file."""
     env = dict(os.environ)
-    env.pop("RODCTL_DEBUG", None)
-    env.setdefault("MPLBACKEND", "Agg")
+    for k in ("RODCTL_DEBUG", "DISPLAY", "WAYLAND_DISPLAY"):
+        env.pop(k, None)
+    env["MPLBACKEND"] = "Agg"
     env.update(extra)
     return env
+
+
+# Build tools. .ci/run installs every one of them, so in CI none is missing. On a machine without one, a test
+# that needs it skips naming it (-rs lists it), except for the host C compiler: the SIL library and so the
+# virtual board are built with it, and its absence fails (host_compiler) as most of the suite would anyway.
+
+def tool(name: str, required: bool = False) -> str:
+    """Full path of build tool `name`; when missing the test skips naming it, or fails if `required`."""
+    path = shutil.which(name)
+    if path is None:
+        why = f"{name} not installed (bash .ci/run installs it)"
+        if required:
+            pytest.fail(why)
+        pytest.skip(why)
+    return path
+
+
+def needs_tools(*names: str) -> pytest.MarkDecorator:
+    """Skip mark for tests that need `names` but call them through rodctl (target_build), not by path."""
+    missing = [n for n in names if shutil.which(n) is None]
+    return pytest.mark.skipif(bool(missing), reason=f"{', '.join(missing)} not installed (bash .ci/run installs it)")
 
 
 def host_compiler() -> str:
     """Full path of the host C compiler the SIL library is built with (rodctl.build.native: $CC, else gcc);
     its absence fails the test: .ci/run installs it."""
-    import shutil
-
-    import pytest
-
     from rodctl.build import native
     from rodgains.errors import UserError
 
@@ -40,6 +65,16 @@ def host_compiler() -> str:
         return shutil.which(native.compiler())
     except UserError as e:
         pytest.fail(f"no host C compiler for the SIL build: {e}")
+
+
+def host_cxx() -> str:
+    """Full path of the host C++ compiler: $CXX as make reads it, else g++ (the C++ of the board layer and its
+    headers, checked on the host); the test skips naming it when it is missing."""
+    cxx = os.environ.get("CXX") or "g++"
+    path = shutil.which(cxx)
+    if path is None:
+        pytest.skip(f"C++ compiler {cxx!r} not installed ($CXX, else g++; bash .ci/run installs g++)")
+    return path
 
 
 def until(condition, timeout: float = 30.0) -> bool:

@@ -7,13 +7,13 @@ start, counts failed USB writes as dropped, and paces the watchdog refresh."""
 from __future__ import annotations
 
 import re
-import shutil
 import subprocess
 from pathlib import Path
 
 import pytest
 
 from firmware_sil import header_path
+from host_tools import host_compiler, host_cxx, tool
 from rodctl import paths
 from rodctl.link import protocol as P
 
@@ -27,11 +27,10 @@ def _code(text: str) -> str:
     return re.sub(r"//[^\n]*|/\*.*?\*/", " ", text, flags=re.S)
 
 
-@pytest.mark.skipif(shutil.which("arm-none-eabi-g++") is None, reason="arm-none-eabi-g++ not installed")
 @pytest.mark.parametrize("source", sorted(p.name for p in BOARD.glob("*.cpp")))
 def test_board_sources_compile_with_wextra_against_the_framework_api(source, tmp_path):
     """The stand-in has an unused parameter, as kinetis.h does: only the wrapped include passes -Wextra."""
-    r = subprocess.run(["arm-none-eabi-g++", *WARN, *ARM, f"-I{STUB}", f"-I{header_path().parent}",
+    r = subprocess.run([tool("arm-none-eabi-g++"), *WARN, *ARM, f"-I{STUB}", f"-I{header_path().parent}",
                         f"-I{paths.CORE_SRC}", "-c", str(BOARD / source), "-o", str(tmp_path / "b.o")],
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
@@ -48,18 +47,17 @@ def test_framework_headers_are_included_only_through_the_wrapper():
 @pytest.fixture(scope="module")
 def harness(tmp_path_factory):
     """The board layer + core built for the host against the stand-in API (board_harness.cpp)."""
-    if shutil.which("g++") is None or shutil.which("gcc") is None:
-        pytest.skip("gcc/g++ not installed (.ci/run installs them)")
+    cc, cxx = host_compiler(), host_cxx()
     d = tmp_path_factory.mktemp("board")
     inc = [f"-I{STUB}", f"-I{header_path().parent}", f"-I{paths.CORE_SRC}"]
     objs = []
     for c in sorted(paths.CORE_SRC.glob("*.c")):
         o = d / (c.stem + ".o")
-        r = subprocess.run(["gcc", "-std=c11", "-O1", *inc, "-c", str(c), "-o", str(o)], capture_output=True, text=True)
+        r = subprocess.run([cc, "-std=c11", "-O1", *inc, "-c", str(c), "-o", str(o)], capture_output=True, text=True)
         assert r.returncode == 0, r.stderr
         objs.append(str(o))
     exe = d / "board"
-    r = subprocess.run(["g++", "-std=gnu++14", "-O1", *inc, str(STUB / "board_harness.cpp"),
+    r = subprocess.run([cxx, "-std=gnu++14", "-O1", *inc, str(STUB / "board_harness.cpp"),
                         *map(str, sorted(BOARD.glob("*.cpp"))), *objs, "-lm", "-o", str(exe)],
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr

@@ -1,7 +1,6 @@
 """The core builds clean for the host and the Cortex-M4F, float only, and refuses a stale header."""
 
 import re
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -9,14 +8,14 @@ import pytest
 
 from firmware_sil import header_path
 from rodctl import paths
-from host_tools import host_compiler
+from host_tools import host_compiler, host_cxx, needs_tools, tool
 from rodctl.build import target_build
 from rodgains.errors import UserError
 
 WARN = ["-std=c11", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror"]
 ARM = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-O2", "-fsingle-precision-constant"]
 SIL = paths.FIRMWARE / "sil"
-needs_arm = pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None, reason="arm-none-eabi-gcc not installed")
+needs_arm = needs_tools(target_build.CC, target_build.NM, target_build.SIZE)  # what target_build runs
 
 
 @pytest.fixture(scope="module")
@@ -57,7 +56,7 @@ def test_core_builds_for_the_m4f_without_soft_double(which):
 def test_soft_double_check_catches_a_double(tmp_path):
     src = tmp_path / "bad.c"
     src.write_text("double twice(double x) { return 2.0 * x; }\nfloat f(float x) { return (float)twice(x); }\n")
-    r = subprocess.run(["arm-none-eabi-gcc", "-std=c11", *ARM, "-c", str(src), "-o", str(tmp_path / "bad.o")],
+    r = subprocess.run([tool("arm-none-eabi-gcc"), "-std=c11", *ARM, "-c", str(src), "-o", str(tmp_path / "bad.o")],
                        capture_output=True, text=True)
     assert r.returncode == 0
     with pytest.raises(UserError, match="__aeabi_d"):
@@ -78,10 +77,7 @@ def stale_header(tmp_path: Path, edit) -> Path:
 
 @pytest.mark.parametrize("cc", ["host", "arm-none-eabi-gcc"])
 def test_stale_schema_version_stops_the_build(cc, request, tmp_path):
-    if cc == "host":
-        cc = request.getfixturevalue("host_cc")
-    elif shutil.which(cc) is None:
-        pytest.skip(f"{cc} not installed")
+    cc = request.getfixturevalue("host_cc") if cc == "host" else tool(cc)
     d = stale_header(tmp_path, lambda t: re.sub(r"(#define ROD_GAINS_SCHEMA_VERSION\s+)\d+", r"\g<1>999", t))
     r = compile_c(cc, tmp_path / "uses_config.c", [d, paths.CORE_SRC])
     assert r.returncode != 0
@@ -106,7 +102,7 @@ def test_hand_edited_float_defaults_stop_the_cpp_build(tmp_path, macro, value, m
     d = stale_header(tmp_path, lambda t: re.sub(rf"(#define {macro}\s+)\S+", rf"\g<1>{value}", t))
     src = tmp_path / "uses_config.cpp"
     src.write_text('#include "rod_config.h"\nint rod_config_probe;\n')
-    r = subprocess.run(["g++", "-std=gnu++14", f"-I{d}", f"-I{paths.CORE_SRC}", "-c", str(src), "-o",
+    r = subprocess.run([host_cxx(), "-std=gnu++14", f"-I{d}", f"-I{paths.CORE_SRC}", "-c", str(src), "-o",
                         str(tmp_path / "u.o")], capture_output=True, text=True)
     assert r.returncode != 0 and message in r.stderr
 
@@ -119,12 +115,12 @@ def test_rod_config_has_no_float_static_assert_in_c():
         assert not re.search(r"\d\.\d*f|_RAD|_NM|_S\b|_V\b|_OHM|_MAX\b", m.group(1)), m.group(1)
 
 
-@pytest.mark.skipif(shutil.which("clang") is None, reason="clang not installed (.ci/run installs it)")
 @pytest.mark.parametrize("which", ["committed", "n20"])
 def test_core_and_sil_compile_with_clang(which, tmp_path):
+    clang = tool("clang")
     inc = [headers()[which].parent, paths.CORE_SRC, SIL]
     for src in [*sorted(paths.CORE_SRC.glob("*.c")), SIL / "rod_sil.c"]:
-        r = compile_c("clang", src, inc, ["-O2", "-pedantic"], tmp_path / (src.stem + ".o"))
+        r = compile_c(clang, src, inc, ["-O2", "-pedantic"], tmp_path / (src.stem + ".o"))
         assert r.returncode == 0 and not r.stderr, f"{src.name}: {r.stderr}"
 
 
@@ -135,15 +131,14 @@ def test_current_header_compiles(host_cc, tmp_path):
     assert r.returncode == 0, r.stderr
 
 
-@pytest.mark.parametrize("cxx", ["g++", "arm-none-eabi-g++"])
+@pytest.mark.parametrize("cxx", ["host", "arm-none-eabi-g++"])
 def test_board_facing_headers_compile_as_cpp(cxx, tmp_path):
     """The Teensy sketch is C++: rod_device.h must work there (extern "C", static_assert)."""
-    if shutil.which(cxx) is None:
-        pytest.skip(f"{cxx} not installed")
+    extra = ARM if cxx.startswith("arm") else []
+    cxx = host_cxx() if cxx == "host" else tool(cxx)
     src = tmp_path / "board.cpp"
     src.write_text('#include "rod_device.h"\nstatic rod_device_t dev;\n'
                    'void tick(const rod_inputs_t *in, rod_outputs_t *out) { rod_device_step(&dev, in, out); }\n')
-    extra = ARM if cxx.startswith("arm") else []
     r = subprocess.run([cxx, "-std=gnu++14", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror", *extra,
                         f"-I{paths.COMMITTED_HEADER.parent}", f"-I{paths.CORE_SRC}", "-c", str(src),
                         "-o", str(tmp_path / "board.o")], capture_output=True, text=True)

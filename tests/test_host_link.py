@@ -200,12 +200,10 @@ def test_heartbeat_keeps_an_armed_device_armed(session):
 def test_silent_host_faults_and_arm_in_fault_is_refused_naming_clear_fault(session):
     session.arm(P.ArmMode.BALANCE)
     with session.heartbeat_paused():
-        t0 = time.monotonic()
-        while session.telemetry.mode != P.Mode.FAULT and time.monotonic() - t0 < 5:
-            time.sleep(0.01)
-        tripped = time.monotonic() - t0
+        # how soon it trips, by the device's clock, is test_firmware_safety.py's
+        # test_heartbeat_timeout_trips_at_the_configured_time; here only that it trips and why
+        until(lambda: session.telemetry.mode == P.Mode.FAULT, timeout=30)
     assert (session.telemetry.mode, session.telemetry.reason) == (P.Mode.FAULT, P.Reason.HEARTBEAT)
-    assert tripped < 5.0  # trips at all; its timing, by the device's clock, is in test_firmware_safety.py
     with pytest.raises(UserError) as e:
         session.arm(P.ArmMode.SWING_UP)
     assert str(e.value) == "device is in FAULT (heartbeat lost): run `rodctl clear-fault`"

@@ -410,10 +410,11 @@ def test_identify_says_how_far_the_identified_rod_is_from_buckling(tmp_path):
 
 
 def _identify_interrupted(tmp_path, second: str, settle: str, until: str, delay_s: float = 0.0,
-                          until_log: str | None = None):
+                          playing: tuple[str, int] | None = None):
     """Run `identify` on sim:// (release, then `second`) and send Ctrl-C `delay_s` after a stderr line starts
-    with `until` (and, with until_log, after a log of that name appears: the experiment is playing);
-    returns (its stderr after that line, the log folder). Exit 130 is asserted."""
+    with `until` (with playing = (experiment, rows): once that experiment's log holds `rows` rows in IDENTIFY
+    instead, a point of the experiment on the board's clock); returns (its stderr after that line, the log
+    folder). Exit 130 is asserted."""
     import signal
 
     from host_tools import start_rodctl
@@ -427,15 +428,33 @@ def _identify_interrupted(tmp_path, second: str, settle: str, until: str, delay_
             seen.append(line)
             if line.startswith(until):
                 break
-        while until_log and not list(logs.glob(f"identify-*-{until_log}.csv")) and proc.poll() is None:
-            time.sleep(0.01)
-        time.sleep(delay_s)
+        if playing is None:
+            time.sleep(delay_s)
+        else:
+            name, rows = playing
+            while _identify_rows(logs, name) < rows and proc.poll() is None:
+                time.sleep(0.02)
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=60)
     finally:
         proc.kill()
     assert proc.returncode == 130, "".join(seen) + err
     return err, logs
+
+
+def _identify_rows(logs, experiment: str) -> int:
+    """Rows of `experiment`'s CSV log, as far as written, in which the board plays it."""
+    from rodctl.link import protocol as P
+
+    log = next(logs.glob(f"identify-*-{experiment}.csv"), None)
+    if log is None:
+        return 0
+    header, *rows = log.read_text().split("\n")
+    if "mode_code" not in header.split(","):  # the header is not written yet
+        return 0
+    col = header.split(",").index("mode_code")
+    # the last element is "" or a row still being appended: not counted
+    return sum(int(row.split(",")[col]) == P.Mode.IDENTIFY for row in rows[:-1])
 
 
 def test_ctrl_c_between_experiments_says_how_to_fit_the_logs_it_kept(tmp_path):
@@ -494,8 +513,8 @@ def test_fitting_logs_skips_the_runs_that_did_not_play_to_their_end(tmp_path):
 
 
 def test_ctrl_c_mid_experiment_disarms_and_counts_only_the_complete_runs(tmp_path):
-    # 1 s into the 4 s chirp
-    err, logs = _identify_interrupted(tmp_path, "chirp", "1", "  letting the rod settle", delay_s=1.0, until_log="chirp")
+    # 0.5 s of the board's clock into the 4 s chirp (1 kHz rows): mid-experiment however slowly this machine runs it
+    err, logs = _identify_interrupted(tmp_path, "chirp", "1", "  letting the rod settle", playing=("chirp", 500))
     last = err.strip().splitlines()[-1]
     assert last.startswith("rodctl: interrupted; the motor is off; 2 experiment logs kept (1 played to the end; "
                            "the fit skips the others): fit it with: rodctl identify "), last

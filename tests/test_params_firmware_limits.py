@@ -9,7 +9,7 @@ import subprocess
 
 import pytest
 
-from host_tools import run_rodctl
+from host_tools import host_cxx, run_rodctl
 from rodgains.errors import ParamError
 from rodgains.params import load_params
 from rodgains.codegen import header_text
@@ -90,6 +90,6 @@ def test_values_on_the_bounds_compile(tmp_path):
     (tmp_path / "rod_gains.h").write_text(header_text(design(p), "test"))
     src = tmp_path / "uses_config.cpp"
     src.write_text('#include "rod_config.h"\nint rod_config_probe;\n')
-    r = subprocess.run(["g++", "-std=gnu++14", f"-I{tmp_path}", f"-I{paths.CORE_SRC}", "-c", str(src), "-o",
+    r = subprocess.run([host_cxx(), "-std=gnu++14", f"-I{tmp_path}", f"-I{paths.CORE_SRC}", "-c", str(src), "-o",
                         str(tmp_path / "u.o")], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr

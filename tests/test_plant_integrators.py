@@ -7,13 +7,12 @@ Measured (Table I + the physical motor, automatic steps; see `python -m rodctl.s
   DER N=5  Verlet h=0.674 ms         ~9e-5 rad
   DER N=20 Verlet h=0.166 ms         ~3e-5 rad
 One encoder count is 6.4e-3 rad. Each bound below is about 2-3x the measured error.
-Set RODCTL_FULL_REFERENCE=1 to integrate the DER references on the Python model (minutes).
+`pytest --full-reference` also integrates the DER references on the Python model (minutes; conftest.py).
 """
 
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 import pytest
@@ -23,7 +22,6 @@ from rodctl.sim.accuracy import accuracy, edge_angles, plant_angles, reference, 
 from rodctl.sim.plant import Plant
 
 P = load_params()
-FULL = os.environ.get("RODCTL_FULL_REFERENCE") == "1"
 
 
 def report(r):
@@ -90,19 +88,30 @@ def test_accuracy_inextensible_n20():
     assert r["max_rate_error"] < 0.1
 
 
-@pytest.mark.parametrize("N, bound", [(5, 3e-4), (20, 1e-4)])
-def test_accuracy_der(N, bound):
-    rhs = "python" if FULL else "c"
-    r = accuracy(P, kind="der", edges=N, seconds=2.0 if FULL else 1.0, rhs=rhs, rtol=1e-9 if N == 5 else 1e-8,
+def _accuracy_der(N: int, rhs: str, seconds: float) -> dict:
+    r = accuracy(P, kind="der", edges=N, seconds=seconds, rhs=rhs, rtol=1e-9 if N == 5 else 1e-8,
                  atol=1e-11 if N == 5 else 1e-10)
     report(r)
+    return r
+
+
+@pytest.mark.parametrize("N, bound", [(5, 3e-4), (20, 1e-4)])
+def test_accuracy_der(N, bound):
+    """Radau on the C model's derivative: seconds, where the Python model's takes minutes."""
+    r = _accuracy_der(N, "c", 1.0)
     assert r["max_angle_error"] < bound
-    if rhs == "c":  # the reference's derivative is the Python model's along the whole trajectory
-        plant = Plant(P, kind="der", edges=N)
-        der, n = plant.model(), plant.n
-        for y in r["reference_states"][::10]:
-            a_py = der.accel(y[:n], y[n:], 0.03)
-            assert np.abs(plant.deriv(y, 0.03)[n:] - a_py).max() < 1e-10 * np.abs(a_py).max()
+    # what makes the C reference stand for the Python one: the same derivative along the whole trajectory
+    plant = Plant(P, kind="der", edges=N)
+    der, n = plant.model(), plant.n
+    for y in r["reference_states"][::10]:
+        a_py = der.accel(y[:n], y[n:], 0.03)
+        assert np.abs(plant.deriv(y, 0.03)[n:] - a_py).max() < 1e-10 * np.abs(a_py).max()
+
+
+@pytest.mark.full_reference
+@pytest.mark.parametrize("N, bound", [(5, 3e-4), (20, 1e-4)])
+def test_accuracy_der_against_radau_on_the_python_model(N, bound):
+    assert _accuracy_der(N, "python", 2.0)["max_angle_error"] < bound
 
 
 # --- long runs ------------------------------------------------------------------------------------

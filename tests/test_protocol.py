@@ -653,14 +653,14 @@ def test_generated_header_offsets_match_the_wire_spec():
 
 
 def test_codec_compiles_for_cortex_m4_without_double(tmp_path):
-    cc = shutil.which("arm-none-eabi-gcc")
-    if cc is None:
-        pytest.skip("arm-none-eabi-gcc not installed")
+    from host_tools import tool
+
+    cc = tool("arm-none-eabi-gcc")
     r = subprocess.run([cc, "-std=c11", *FIRMWARE_WARNINGS, "-O2", "-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16",
                         "-mfloat-abi=hard", "-mno-unaligned-access", "-fsingle-precision-constant", f"-I{CORE}", "-c",
                         str(CORE / "rod_protocol.c"), "-o", str(tmp_path / "p.o")], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    nm = subprocess.run(["arm-none-eabi-nm", str(tmp_path / "p.o")], capture_output=True, text=True).stdout
+    nm = subprocess.run([tool("arm-none-eabi-nm"), str(tmp_path / "p.o")], capture_output=True, text=True).stdout
     assert "__aeabi_d" not in nm and "malloc" not in nm  # no double arithmetic, no allocation
 
 

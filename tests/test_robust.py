@@ -10,6 +10,7 @@ import socket
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -129,10 +130,27 @@ def test_dask_local_cluster_gives_the_same_rows(local_rows):
     assert rows == local_rows
 
 
-def _free_port() -> int:
+@contextmanager
+def _refusing_port():
+    """A localhost port that refuses connections for as long as it is held: bound, so no other program can
+    take it meanwhile, and not listening."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+        yield s.getsockname()[1]
+
+
+def _scheduler_address(scheduler_file: Path, proc: subprocess.Popen, timeout: float = 120) -> str:
+    """The address a `dask scheduler --scheduler-file` wrote once it listens (bounded generously: two noisy
+    cores)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            return json.loads(scheduler_file.read_text())["address"]
+        except (OSError, ValueError, KeyError):  # not yet written, or half written
+            pass
+        assert proc.poll() is None, f"dask scheduler exited ({proc.returncode})"
+        assert time.monotonic() < deadline, "dask scheduler did not come up"
+        time.sleep(0.2)
 
 
 def _dask(*args, log: Path) -> subprocess.Popen:
@@ -146,11 +164,13 @@ def test_dask_scheduler_and_workers_as_subprocesses_survive_a_killed_worker(loca
     pytest.importorskip("distributed")
     from distributed import Client
 
-    port = _free_port()
-    address = f"tcp://127.0.0.1:{port}"
-    procs = [_dask("scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard",
-                   log=tmp_path / "scheduler.log")]
+    # port 0: the scheduler binds a free port itself and names it in the file, so no port chosen here can be
+    # taken by another program before it binds
+    scheduler_file = tmp_path / "scheduler.json"
+    procs = [_dask("scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                   "--scheduler-file", str(scheduler_file), log=tmp_path / "scheduler.log")]
     try:
+        address = _scheduler_address(scheduler_file, procs[0])
         for i in range(2):
             procs.append(_dask("worker", address, "--nthreads", "1", "--no-nanny", "--no-dashboard",
                                "--host", "127.0.0.1", "--name", f"w{i}", log=tmp_path / f"worker{i}.log"))
@@ -244,9 +264,10 @@ def test_unknown_case_set_is_one_line_exit_2(argv, tmp_path, monkeypatch, capsys
 
 def test_unreachable_scheduler_is_one_line_exit_2(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    assert main(["robustness", "--cases", "nominal", "--samples", "0", "--scheduler", f"127.0.0.1:{_free_port()}"]) == 2
+    with _refusing_port() as port:
+        assert main(["robustness", "--cases", "nominal", "--samples", "0", "--scheduler", f"127.0.0.1:{port}"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].startswith("rodctl: --scheduler tcp://127.0.0.1:") and "cannot reach" in err[-1]
+    assert err == [f"rodctl: --scheduler tcp://127.0.0.1:{port}: cannot reach the Dask scheduler (Connection refused)"]
     assert not (tmp_path / "robustness.json").exists()
 
 

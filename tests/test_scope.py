@@ -145,9 +145,7 @@ def test_a_screenshot_that_cannot_be_saved_at_the_end_still_disarms_and_ends(xdi
 
 
 def test_scope_without_a_display_is_one_clear_line():
-    env = rodctl_env()
-    env.pop("DISPLAY", None)
-    env.pop("WAYLAND_DISPLAY", None)
+    env = rodctl_env()  # headless: rodctl_env drops DISPLAY and WAYLAND_DISPLAY
     r = subprocess.run([*RODCTL, "scope", "--port", "sim://"], capture_output=True, text=True, env=env, timeout=60)
     assert r.returncode == 1 and "Traceback" not in r.stderr
     lines = r.stderr.strip().splitlines()
@@ -156,9 +154,7 @@ def test_scope_without_a_display_is_one_clear_line():
 
 def test_the_headless_scopes_suggestion_pastes_into_a_shell():
     """The suggested command quotes a port with ? and & (zsh refuses an unmatched glob; bash runs `&` in the background)."""
-    env = rodctl_env()
-    env.pop("DISPLAY", None)
-    env.pop("WAYLAND_DISPLAY", None)
+    env = rodctl_env()  # headless: rodctl_env drops DISPLAY and WAYLAND_DISPLAY
     r = subprocess.run([*RODCTL, "scope", "--port", "sim://?theta0_deg=150&motor_sign=1"], capture_output=True,
                        text=True, env=env, timeout=60)
     assert r.returncode == 1

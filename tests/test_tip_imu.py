@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from host_tools import run_rodctl
+from host_tools import run_rodctl, tool
 from rodgains.design import design
 from rodgains.imu import ImuSite, measurement, observability
 from rodgains.linearize import linearize_upright, numerical_jacobian
@@ -121,8 +121,9 @@ def test_the_header_carries_the_imu_tables_and_compiles_for_the_m4f(imu_design, 
     h.write_text(header_text(imu_design, "test"))
     text = h.read_text()
     assert "#define ROD_NY" in text and "ROD_IMU_L_INIT" in text and f"#define ROD_IMU_NA {imu_design.imu.NA}" in text
+    cc = tool("arm-none-eabi-gcc")
     for src in sorted(paths.CORE_SRC.glob("*.c")):
-        r = subprocess.run(["arm-none-eabi-gcc", "-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard",
+        r = subprocess.run([cc, "-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard",
                             "-O2", "-std=c11", "-Wall", "-Wextra", "-Wdouble-promotion", "-Werror", f"-I{tmp_path}",
                             f"-I{paths.CORE_SRC}", "-c", str(src), "-o", str(tmp_path / "x.o")],
                            capture_output=True, text=True)
@@ -136,7 +137,8 @@ def _compile_board_imu(include_dir: Path) -> subprocess.CompletedProcess:
     flags every board source is built with (test_board_layer.py)."""
     from test_board_layer import ARM, BOARD, STUB, WARN
 
-    return subprocess.run(["arm-none-eabi-g++", *WARN, *ARM, f"-I{STUB}", f"-I{include_dir}", f"-I{paths.CORE_SRC}", "-c",
+    cxx = tool("arm-none-eabi-g++")
+    return subprocess.run([cxx, *WARN, *ARM, f"-I{STUB}", f"-I{include_dir}", f"-I{paths.CORE_SRC}", "-c",
                            str(BOARD / "board_imu.cpp"), "-o", str(include_dir / "b.o")], capture_output=True, text=True)
 
 
