@@ -31,6 +31,7 @@ class FakeBoard:
         self._seq = 0
         self._stop = threading.Event()
         self._lock = threading.Lock()
+        self._send_lock = threading.Lock()
         self._threads = [threading.Thread(target=self._rx, daemon=True), threading.Thread(target=self._tx, daemon=True)]
 
     # --- what the test uses ---
@@ -69,7 +70,10 @@ class FakeBoard:
             self._stop.set()
 
     def _send(self, msg) -> None:
-        self._write(P.encode(msg, self._next_seq(), int(time.monotonic() * 1e6) & 0xFFFFFFFF))
+        # the ACKs (receive thread) and the telemetry (send thread) share one sequence: numbered and written as
+        # one, or the host may see 10, 12, 11 and count a gap the board never made
+        with self._send_lock:
+            self._write(P.encode(msg, self._next_seq(), int(time.monotonic() * 1e6) & 0xFFFFFFFF))
 
     def _hello(self):
         return P.Hello(fw_major=0, fw_minor=1, fw_patch=0, gains_schema=1, n=2, mode=self.mode, reason=0, rig=0,

@@ -101,7 +101,7 @@ def test_when_the_reader_stops_heartbeats_stop_disarm_goes_out_and_the_command_f
     with FakeBoard() as board:
         # --duration far beyond any stall: had the failure not ended the command, it would end as
         # "arm ended (duration)" with exit 0, which the asserts below tell apart
-        rc = cli.main(["arm", "--swing-up", "--duration", "600", "--port", board.path])
+        rc = cli.main(["arm", "--swing-up", "--duration", "60", "--port", board.path])
         disarms = board.times_of(P.MsgType.DISARM)
         assert disarms, "no DISARM after the reader stopped"
         time.sleep(0.5)  # 5 heartbeat intervals: none may come after the DISARM

@@ -568,7 +568,7 @@ def test_the_polish_simulates_the_files_plant_where_the_search_left_off():
     problem = F.FitProblem(list(records("A")), p, F.NAMES, F.fit_model(p))
     x = problem.start_points()[0]
     fast = problem.residual(x)
-    problem.use_plant(())
+    problem.model = ()
     own = problem.residual(x)
     assert problem.evaluations == 2
     assert np.abs(own - fast).max() > 0.1  # quantization noise units: the two plants differ

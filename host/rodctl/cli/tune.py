@@ -71,7 +71,7 @@ def run_tune(args) -> int:
         try:
             summary = T.tune(params, runner, dims=dims, budget=args.budget, make_units=make_units,
                              study_dir=args.study, meta=meta, sampler_seed=seed, goals=args.goals,
-                             starts=tuple(starts), study_checked=bool(args.study))
+                             starts=tuple(starts))
         except KeyboardInterrupt:
             runner.close(abandon=True)  # the message below, not the workers' wind-down, ends the command
             if args.study:

@@ -292,7 +292,7 @@ def fit(records: list[Record], params, *, fitted: tuple[str, ...] = NAMES, start
     problem = FitProblem(records, params, fitted, model)
     best = best_start(problem, starts, max_nfev, progress)
     if polish and problem.model:
-        problem.use_plant(())  # from here on, the file's own plant
+        problem.model = ()  # FitProblem.simulate reads it: from here on, the file's own plant
         if progress:
             progress("fit: polish on the parameter file's plant")
         best = problem.solve("polish", best.x, POLISH_NFEV)
@@ -325,13 +325,9 @@ class FitProblem:
         self.simulator = Simulator(records)
         self.evaluations = 0  # simulations run
         self.tried: list[dict] = []  # each solve: where it started, its cost and simulations
-        self._last = (None, None)  # least_squares asks for the Jacobian where it has just evaluated the residual
-
-    def use_plant(self, model: tuple[str, ...]) -> None:
-        """Simulate on the parameter file's plant with these --set overrides from now on. The residual last
-        evaluated was another plant's: a solve starting where it ended must not be handed it back."""
-        self.model = model
-        self._last = (None, None)
+        # least_squares asks for the Jacobian where it has just evaluated the residual; the plant is part of the
+        # key, as the polish starts on another plant where the search ended
+        self._last: tuple = (None, None, None)
 
     def values(self, x: np.ndarray) -> dict[str, float]:
         """Every FIT_PARAMS value at x (the ones not fitted at their nominal) [unit]."""
@@ -345,13 +341,13 @@ class FitProblem:
         return self.simulator.run(candidate, starts=x[self.n_fitted:])
 
     def residual(self, x: np.ndarray) -> np.ndarray:
-        last_x, last_r = self._last
-        if last_x is not None and np.array_equal(last_x, x):
+        last_model, last_x, last_r = self._last
+        if last_x is not None and last_model == self.model and np.array_equal(last_x, x):
             return last_r.copy()
         th = self.simulate(x)
         r = np.concatenate([(s[:k] - m[:k])[u] / self.noise
                             for s, m, k, u in zip(th, self.measured, self.split, self.moving)])
-        self._last = (np.array(x, copy=True), r)
+        self._last = (self.model, np.array(x, copy=True), r)
         return r.copy()
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:

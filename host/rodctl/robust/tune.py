@@ -166,9 +166,8 @@ def check_study(study_dir: str, meta: dict) -> None:
                                      "new --study folder") from None
 
 
-def open_study(study_dir: str | None, meta: dict, sampler_seed: int, *, checked: bool = False):
-    """A new or resumed Optuna study (journal file in study_dir, or in memory). checked: the caller has
-    run check_study on study_dir already (reading the whole journal once is enough)."""
+def open_study(study_dir: str | None, meta: dict, sampler_seed: int):
+    """A new or resumed Optuna study (journal file in study_dir, or in memory)."""
     import optuna
     from optuna.storages import JournalStorage
     from optuna.storages.journal import JournalFileBackend
@@ -177,8 +176,7 @@ def open_study(study_dir: str | None, meta: dict, sampler_seed: int, *, checked:
     sampler = optuna.samplers.TPESampler(seed=sampler_seed, multivariate=True)
     if study_dir is None:
         return optuna.create_study(study_name=STUDY_NAME, direction="maximize", sampler=sampler)
-    if not checked:
-        check_study(study_dir, meta)
+    check_study(study_dir, meta)
     folder = Path(study_dir)
     folder.mkdir(parents=True, exist_ok=True)
     meta_path = folder / "study.json"
@@ -261,15 +259,14 @@ def best_feasible(study):
 
 def tune(params: Params, runner, *, dims: tuple[Dim, ...], budget: int, make_units: Callable[[Params], list],
          study_dir: str | None, meta: dict, sampler_seed: int, progress: bool = True, goals: bool = False,
-         starts: tuple[Params, ...] = (), study_checked: bool = False) -> dict:
+         starts: tuple[Params, ...] = ()) -> dict:
     """Run trials until `budget` have finished; returns the summary the output file is written from.
     goals: require the nominal goals (module docstring). starts: more parameter files whose values
-    are tried right after the starting point (earlier tunes, hand designs). study_checked: the caller
-    has run check_study on study_dir already (rodctl tune does, before its workers start).
+    are tried right after the starting point (earlier tunes, hand designs).
     KeyboardInterrupt propagates after the running trial is marked failed (finished ones stay)."""
     from optuna.trial import TrialState
 
-    study = open_study(study_dir, meta, sampler_seed, checked=study_checked)
+    study = open_study(study_dir, meta, sampler_seed)
     if not study.get_trials(deepcopy=False):
         study.enqueue_trial(starting_point(params, dims))
         for extra in starts:
