@@ -24,7 +24,18 @@ def _fake_run_case(final_deg: float, torque_nm: float):
 
 
 def test_control_goals_are_reported_with_verdicts_and_a_miss_exits_1(monkeypatch, tmp_path, capsys):
-    monkeypatch.setattr(M, "run_case", _fake_run_case(final_deg=0.8, torque_nm=0.025))
+    fake = _fake_run_case(final_deg=0.8, torque_nm=0.025)
+    zeros = []  # the boot zero of each run judged on its own plant
+
+    def run_case(params, case, task, plant_params=None, **kw):
+        if plant_params is not None:
+            zeros.append((plant_params["encoder"]["zero_error_deg"], task))
+        r = fake(params, case, task, **kw)
+        if plant_params is not None and plant_params["encoder"]["zero_error_deg"] == 0.0 and task == "swingup":
+            r["final_dev_deg"] = 8.3  # the zero on a count's edge: the worst place decides
+        return r
+
+    monkeypatch.setattr(M, "run_case", run_case)
     rows = [{"passed": True, "case": "x", "final_dev_deg": 1.0}] * 70 + \
         [{"passed": False, "case": "backlash3", "final_dev_deg": 4.2}] * 2
     monkeypatch.setattr(M, "run_matrix", lambda p, **kw: rows)
@@ -40,14 +51,17 @@ def test_control_goals_are_reported_with_verdicts_and_a_miss_exits_1(monkeypatch
     got = json.loads(out.read_text())
     assert got == {"nominal_balance_settle_s": 0.7, "nominal_balance_final_deg": 0.8, "nominal_swingup_catch_s": 0.93,
                    "nominal_swingup_settle_s": 1.55, "nominal_swingup_final_deg": 0.8, "balanced_torque_rms_mNm": 25.0,
-                   "matrix_runs_passing": 70, "matrix_runs": 72, "backlash3_final_deg": 4.2, "longest_rod_ratio": 1.1,
+                   "matrix_runs_passing": 70, "matrix_runs": 72, "backlash3_final_deg": 4.2,
+                   "zero_place_worst_final_deg": 8.3, "longest_rod_ratio": 1.1,
                    "longest_rod_ratio_imu": 1.0, "longest_rod_ratio_imu_no_play": 1.3,
                    "imu_own_design_e_minus15_final_deg": 0.8, "imu_own_design_rho_plus15_final_deg": 0.8}
     assert walks == [(False, 1.0), (True, 1.0), (True, 0.0)]  # base only, then the IMU with and without the play
+    assert sorted({z for z, _ in zeros}) == [0.0, 0.045, 0.09, 0.135, 0.18, 0.27] and len(zeros) == 12  # both tasks
     lines = {line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line.strip()}
     assert " ok " in lines["nominal_balance_settle_s"] and " ok " in lines["nominal_balance_final_deg"]
     assert "MISSED" in lines["balanced_torque_rms_mNm"] and "(goal <= 20 mN m)" in lines["balanced_torque_rms_mNm"]
     assert "MISSED" in lines["backlash3_final_deg"] and "MISSED" in lines["longest_rod_ratio"]
+    assert "MISSED" in lines["zero_place_worst_final_deg"] and "(goal <= 3 deg)" in lines["zero_place_worst_final_deg"]
     assert "MISSED" in lines["longest_rod_ratio_imu"] and " ok " in lines["longest_rod_ratio_imu_no_play"]
     assert "MISSED" not in lines["matrix_runs_passing"]  # a count, no goal: the play makes it a share
     assert " ok " in lines["imu_own_design_e_minus15_final_deg"] and "(goal <= 3 deg)" in lines["imu_own_design_e_minus15_final_deg"]

@@ -42,6 +42,8 @@ GOALS = {
     "matrix_runs_passing": (None, "", "runs", "robustness matrix on the faithful plant (docs/control.md)"),
     "matrix_runs": (None, "", "runs", "runs in the robustness matrix"),
     "backlash3_final_deg": (3.0, "<=", "deg", "3 deg of gearbox play: the larger final deviation of the two tasks"),
+    "zero_place_worst_final_deg": (3.0, "<=", "deg", "the boot zero at six places within its count (0 to 0.27 deg), "
+                                   "1 deg of play: the largest final deviation of the nominal balance and swing-up"),
     "track_720p_frames_per_s": (120.0, ">=", "frames/s", "`rodctl track`'s pass over a 720p video (decode, markers, repeats)"),
     "longest_rod_ratio": (1.3, ">=", "x L_crit", "longest rod held within 3 deg from 10 deg on the faithful plant, design redone per length"),
     "longest_rod_ratio_imu": (1.3, ">=", "x L_crit", "the same with the tip IMU (issue 35)"),
