@@ -75,6 +75,17 @@ def host_cxx() -> str:
     return tool("g++")
 
 
+@contextmanager
+def refusing_port():
+    """A localhost port that refuses connections for as long as it is held: bound, so no other program can
+    take it meanwhile, and not listening."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        yield s.getsockname()[1]
+
+
 def until(condition, timeout: float = 30.0) -> bool:
     """Poll `condition` until it holds or `timeout` [s] passes; its last value. A loaded machine runs the
     virtual board and the windows late, never differently: wait for what is checked, not a fixed time."""

@@ -9,6 +9,7 @@ import stat
 
 import pytest
 
+from host_tools import refusing_port
 from rodctl import cli, paths
 from rodctl.build import platformio
 
@@ -147,9 +148,7 @@ def test_registry_probe_sees_a_closed_and_an_open_port(monkeypatch):
         srv.listen(1)
         port = srv.getsockname()[1]
         assert platformio.registry_reachable(timeout=5, host="127.0.0.1", port=port)
-    with socket.socket() as s:  # bound, not listening: connections are refused
-        s.bind(("127.0.0.1", 0))
-        closed = s.getsockname()[1]
+    with refusing_port() as closed:
         assert not platformio.registry_reachable(timeout=5, host="127.0.0.1", port=closed)
     monkeypatch.setenv("HTTPS_PROXY", "http://proxy.invalid:3128")  # behind a proxy we cannot tell: assume yes
     assert platformio.registry_reachable(timeout=5, host="127.0.0.1", port=closed)

@@ -6,15 +6,13 @@ from __future__ import annotations
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
-from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
-from host_tools import ctrl_c_as_at_a_terminal
+from host_tools import ctrl_c_as_at_a_terminal, refusing_port, until
 
 from rodgains.params import load_params
 
@@ -130,27 +128,20 @@ def test_dask_local_cluster_gives_the_same_rows(local_rows):
     assert rows == local_rows
 
 
-@contextmanager
-def _refusing_port():
-    """A localhost port that refuses connections for as long as it is held: bound, so no other program can
-    take it meanwhile, and not listening."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        yield s.getsockname()[1]
-
-
 def _scheduler_address(scheduler_file: Path, proc: subprocess.Popen, timeout: float = 120) -> str:
     """The address a `dask scheduler --scheduler-file` wrote once it listens (bounded generously: two noisy
     cores)."""
-    deadline = time.monotonic() + timeout
-    while True:
+    def written() -> str | None:
         try:
             return json.loads(scheduler_file.read_text())["address"]
         except (OSError, ValueError, KeyError):  # not yet written, or half written
-            pass
-        assert proc.poll() is None, f"dask scheduler exited ({proc.returncode})"
-        assert time.monotonic() < deadline, "dask scheduler did not come up"
-        time.sleep(0.2)
+            return None
+
+    until(lambda: written() is not None or proc.poll() is not None, timeout=timeout)
+    assert proc.poll() is None, f"dask scheduler exited ({proc.returncode})"
+    address = written()
+    assert address is not None, "dask scheduler did not come up"
+    return address
 
 
 def _dask(*args, log: Path) -> subprocess.Popen:
@@ -264,7 +255,7 @@ def test_unknown_case_set_is_one_line_exit_2(argv, tmp_path, monkeypatch, capsys
 
 def test_unreachable_scheduler_is_one_line_exit_2(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    with _refusing_port() as port:
+    with refusing_port() as port:
         assert main(["robustness", "--cases", "nominal", "--samples", "0", "--scheduler", f"127.0.0.1:{port}"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"rodctl: --scheduler tcp://127.0.0.1:{port}: cannot reach the Dask scheduler (Connection refused)"]

@@ -14,6 +14,11 @@ IMU_WALK_STEP = 0.02  # the IMU's longest-rod walks step this much of L_crit: th
 ZERO_PLACES_DEG = (0.0, 0.045, 0.09, 0.135, 0.18, 0.27)
 
 
+def _final_deg(r: dict) -> float:
+    """A run's final deviation [deg]; a run that faulted or has no end counts as fallen (180)."""
+    return r["final_dev_deg"] if r["fault_reason"] == 0 and r["final_dev_deg"] is not None else 180.0
+
+
 def measure(quick: bool = False) -> dict[str, float]:
     import numpy as np
     from rodgains.params import load_params
@@ -42,8 +47,7 @@ def measure(quick: bool = False) -> dict[str, float]:
         out["backlash3_final_deg"] = round(max(r["final_dev_deg"] for r in wide), 2)
         ends = [M.run_case(p, M.CASES["nominal"], task, plant_params=p.with_overrides(f"encoder.zero_error_deg={z}"))
                 for z in ZERO_PLACES_DEG for task in M.TASKS]
-        out["zero_place_worst_final_deg"] = round(max(r["final_dev_deg"] if r["fault_reason"] == 0 else 180.0
-                                                      for r in ends), 2)
+        out["zero_place_worst_final_deg"] = round(max(map(_final_deg, ends)), 2)
         # issue 35: with the tip IMU, on the faithful plant and on the same plant without the gearbox's play,
         # where there is no flank to keep loaded and the rod is held upright (docs/sensors.md)
         imu = p.with_overrides("sensors.tip_imu=true")
@@ -59,6 +63,5 @@ def measure(quick: bool = False) -> dict[str, float]:
         # IMU and a design for that rod, as rodctl identify's file gives it: the larger end deviation of both tasks
         for key, name in (("imu_own_design_e_minus15_final_deg", "E-15"), ("imu_own_design_rho_plus15_final_deg", "rho+15")):
             runs = [M.run_case(imu, M.own_design(M.CASES[name]), task) for task in M.TASKS]
-            out[key] = round(max(r["final_dev_deg"] if r["fault_reason"] == 0 and r["final_dev_deg"] is not None
-                                 else 180.0 for r in runs), 2)
+            out[key] = round(max(map(_final_deg, runs)), 2)
     return out
