@@ -80,8 +80,8 @@ DEFAULT_SEQUENCE = (
 EXPERIMENTS = {e.name: e for e in DEFAULT_SEQUENCE}
 
 
-# The settle move: well below the pendulum's frequency (about 1.2 Hz for Table I's rod), so the rod
-# follows the push; each stroke leaves it nearer hanging once the push no longer beats the dry
+# The settle move: well below the pendulum's frequency (about 1.4 Hz for Table I's rod, the header's
+# ROD_SWING_OMEGA0_RAD_S), so the rod follows the push; each stroke leaves it nearer hanging once the push no longer beats the dry
 # friction, and the last strokes are too weak to move it.
 SETTLE_HZ = 0.3
 SETTLE_CYCLES = 5
