@@ -261,7 +261,8 @@ def test_sweep_and_robustness_do_not_replace_a_file_without_force(argv, option, 
 
 
 @pytest.mark.parametrize("argv, start", [
-    (["robustness", "--seconds", "1e9", "--json", "", "--plot", ""], "rodctl: --seconds 1e+09: must be in (0, 600] s"),
+    (["robustness", "--seconds", "1e9", "--json", "", "--plot", ""],
+     "rodctl: --seconds 1e+09: must be in [0.05, 600] s"),
     (["sweep", "--grid", "rod.length=0.15", "--seconds", "601", "--out", "{tmp}/s.parquet"], "rodctl: --seconds 601"),
     (["identify", "--port", "sim://", "--yes", "--settle", "-5", "--out", "{tmp}/a.toml"], "rodctl: --settle -5"),
     (["plot", "{tmp}/run.csv", "--snapshots", "-3", "--out", "{tmp}/a.png"], "rodctl: --snapshots -3"),
@@ -277,6 +278,13 @@ def test_sweep_and_robustness_do_not_replace_a_file_without_force(argv, option, 
      "rodctl: --samples 100001"),
     (["scope", "--port", "sim://", "--duration", "inf"], "rodctl: --duration inf: must be in (0, 604800] s"),
     (["scope", "--port", "sim://", "--set", "gearbox.backlash_deg=-1"], "rodctl: gearbox.backlash_deg: must be"),
+    # a run shorter than a control period has no samples: an IndexError after the firmware was built
+    (["sim", "--scenario", "balance", "--duration", "1e-9", "--no-plot", "--no-log"],
+     "rodctl: --duration 1e-09: must be in [0.05, 600] s"),
+    (["robustness", "--seconds", "0.001", "--json", "", "--plot", ""], "rodctl: --seconds 0.001: must be in [0.05"),
+    (["sweep", "--grid", "rod.length=0.15", "--seconds", "1e-9", "--out", "{tmp}/s.parquet"],
+     "rodctl: --seconds 1e-09: must be in [0.05"),
+    (["tune", "--seconds", "0.01", "--budget", "1", "--out", "{tmp}/t.toml"], "rodctl: --seconds 0.01: must be in"),
 ])
 def test_numbers_out_of_range_are_one_line_before_any_work(argv, start, tmp_path, capsys):
     from rodctl.cli import main
@@ -574,3 +582,161 @@ def test_a_folder_where_a_log_s_events_file_goes_is_a_warning_not_a_crash(tmp_pa
     assert r.stderr.strip().splitlines() == [f"rodctl: warning: {events}: not a file; reading the log without its "
                                              "events"]
     assert len(pd.read_parquet(tmp_path / "o.parquet")) == len(pd.read_csv(log))
+
+
+def test_a_folder_beside_the_header_is_refused_before_the_header_is_written(tmp_path):
+    """--force replaces a user's file beside the header, never a folder: that write would fail after the header
+    was written (exit 2 with the header half of the pair on disk)."""
+    (tmp_path / "rod_gains.toml").mkdir()
+    r = run_rodctl("gains", "--header", str(tmp_path / "rod_gains.h"), "--force")
+    assert r.returncode == 2
+    assert _one_line(r) == f"rodctl: --header {tmp_path / 'rod_gains.toml'}: is a folder"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rod_gains.toml"]
+
+
+# An empty name (an unset shell variable) is refused with the option's name, never taken for the default name,
+# for stdout, for "no such output" or for the current folder.
+EMPTY_NAME_CASES = [
+    (["params", "--out", ""], "--out: empty file name"),
+    (["log", "--port", "/dev/ttyNOPE0", "--duration", "1", "--out", ""], "--out: empty file name"),
+    (["arm", "--balance", "--port", "/dev/ttyNOPE0", "--out", ""], "--out: empty file name"),
+    (["log-convert", "{tmp}/run.csv", "--out", ""], "--out: empty file name"),
+    (["sim", "--scenario", "balance", "--no-plot", "--log", ""], "--log: empty file name"),
+    (["sim", "--scenario", "balance", "--no-log", "--plot", ""], "--plot: empty file name"),
+    (["sil-lib", "-o", ""], "--output: empty file name"),
+    (["sim-device", "--duration", "1", "--link", ""], "--link: empty file name"),
+    (["check", "--port", "/dev/ttyNOPE0", "--json", ""], "--json: empty file name"),
+    (["bench", "--only", "m4", "--json", ""], "--json: empty file name"),
+    (["tune", "--budget", "1", "--out", "{tmp}/t.toml", "--study", ""], "--study: empty folder name"),
+    (["identify", "{tmp}/run.csv", "--out", "{tmp}/a.toml", "--plot", ""], "--plot: empty file name"),
+    (["track", "v.mp4", "--log", "run.csv", "--out", "{tmp}/t.parquet", "--plot", ""], "--plot: empty file name"),
+    (["scope", "--port", "sim://", "--record", ""], "--record: empty file name"),
+    (["protocol", "--root", ""], "--root: empty folder name"),
+]
+
+
+@pytest.mark.parametrize("argv, line", EMPTY_NAME_CASES, ids=[f"{a[0]}-{i}" for i, (a, _) in
+                                                              enumerate(EMPTY_NAME_CASES)])
+def test_an_empty_output_name_is_refused_and_nothing_is_written(argv, line, tmp_path, monkeypatch, capsys):
+    from rodctl.cli import main
+
+    monkeypatch.chdir(tmp_path)  # where a default name or "." would have put the files
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    assert capsys.readouterr().err == f"rodctl: {line}\n"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_tune_only_empty_searches_nothing_and_is_refused(tmp_path, capsys):
+    from rodctl.cli import main
+
+    assert main(["tune", "--budget", "1", "--only", "", "--out", str(tmp_path / "t.toml")]) == 2
+    assert capsys.readouterr().err.startswith("rodctl: --only : not a searched parameter; one or more of lqr.q_angle")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["robustness", "--cases", "nominal", "--samples", "0", "--json", "{tmp}/r.png", "--plot", "{tmp}/r.png"],
+     "--plot {tmp}/r.png is also the --json"),
+    (["identify", "{tmp}/run.csv", "--out", "{tmp}/a.png", "--plot", "{tmp}/a.png"], "--plot {tmp}/a.png is also "
+                                                                                     "the --out"),
+])
+def test_two_outputs_of_one_name_are_refused_before_any_work(argv, option, tmp_path, capsys):
+    """The figure would replace the JSON (or the parameter file) written just before it."""
+    from rodctl.cli import main
+
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    assert capsys.readouterr().err == (f"rodctl: {option.format(tmp=tmp_path)}: one would replace the other; "
+                                       "name them apart\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+def _edited_log(tmp_path, edit):
+    """A copy of a simulated CSV log (and its sidecar) with `edit` applied to its lines."""
+    src = _a_log(tmp_path / "src")
+    bad = tmp_path / "bad.csv"
+    bad.write_text("".join(edit(src.read_text().splitlines(keepends=True))))
+    bad.with_name("bad.csv.json").write_text(src.with_name(src.name + ".json").read_text())
+    return bad
+
+
+def _no_theta_hat_1(lines):
+    return [lines[0].replace("theta_hat_1_rad", "foo"), *lines[1:]]
+
+
+def _an_infinite_time(lines):
+    return [lines[0], lines[1], "1e400" + lines[2][lines[2].index(","):], *lines[3:]]
+
+
+@pytest.mark.parametrize("edit, says", [
+    (_no_theta_hat_1, "no column theta_hat_1_rad (of 7 theta_hat columns, one per edge)"),
+    (_an_infinite_time, "time_s of telemetry row 2 is inf, not a time"),
+])
+@pytest.mark.parametrize("command", ["plot", "log-convert"])
+def test_a_log_missing_a_column_or_with_a_non_finite_time_is_one_line_and_writes_nothing(command, edit, says,
+                                                                                         tmp_path):
+    """Was an internal error (plot), and a converted file or its .partial left behind (log-convert)."""
+    bad = _edited_log(tmp_path, edit)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    out = tmp_path / ("out.png" if command == "plot" else "out.mcap")
+    r = run_rodctl(command, str(bad), "--out", str(out))
+    assert r.returncode == 2 and _one_line(r) == f"rodctl: {bad}: {says}", r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+    if command == "log-convert":  # every format the writer makes
+        for name in ("out.parquet", "out.csv"):
+            r = run_rodctl(command, str(bad), "--out", str(tmp_path / name))
+            assert r.returncode == 2 and says in _one_line(r)
+        assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_identify_on_a_log_without_a_column_it_fits_names_it(tmp_path):
+    bad = _edited_log(tmp_path, lambda lines: [lines[0].replace("mode_code", "mode_kode"), *lines[1:]])
+    r = run_rodctl("identify", str(bad), "--out", str(tmp_path / "a.toml"))
+    assert r.returncode == 2 and _one_line(r).startswith(f"rodctl: {bad}: no column mode_code"), r.stderr
+    assert not (tmp_path / "a.toml").exists() and not (tmp_path / "a.png").exists()
+
+
+@pytest.mark.parametrize("where, says", [("{tmp}", "eeprom={tmp}: is a folder; name the EEPROM's file"),
+                                         ("{tmp}/missing/e.bin", "eeprom={tmp}/missing/e.bin: folder {tmp}/missing "
+                                                                 "does not exist")])
+def test_a_sim_eeprom_that_cannot_be_a_file_is_bad_input_not_a_board_that_stopped(where, says, tmp_path):
+    """It was found at the SAVE_RIG, as "device disconnected (virtual board stopped: IsADirectoryError)", exit 1."""
+    r = run_rodctl("set", "--save", "encoder_sign=-1", "--port", "sim://?eeprom=" + where.format(tmp=tmp_path))
+    assert r.returncode == 2, r.stderr
+    assert _one_line(r) == "rodctl: sim://: " + says.format(tmp=tmp_path)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("hub", ["inf,1", "nan,nan"])
+def test_track_hub_must_be_finite(hub, tmp_path):
+    r = run_rodctl("track", "v.mp4", "--log", "run.csv", "--out", str(tmp_path / "t.parquet"), "--hub", hub)
+    assert r.returncode == 2 and _one_line(r) == f"rodctl: --hub '{hub}': expected X,Y in pixels, finite numbers"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_track_of_a_file_that_is_no_video_is_its_one_line_without_a_progress_bar(tmp_path):
+    log = _a_log(tmp_path)
+    video = tmp_path / "clip.mp4"
+    video.write_text("not a video\n")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    r = run_rodctl("track", str(video), "--log", str(log), "--out", str(tmp_path / "t.parquet"))
+    assert r.returncode == 2 and _one_line(r) == f"rodctl: video {video}: OpenCV cannot read it as a video"
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_a_pgf_figure_without_latex_is_refused_before_anything_is_written(tmp_path, monkeypatch, capsys):
+    """matplotlib finds LaTeX missing only while drawing: a traceback-free 'internal error', exit 1, after
+    `rodctl track` had written its logs (or robustness its JSON, identify its parameter file)."""
+    import shutil
+
+    import matplotlib
+
+    from rodctl.cli import main
+
+    tex = matplotlib.rcParams["pgf.texsystem"]
+    which = shutil.which
+    monkeypatch.setattr(shutil, "which", lambda name, *a, **kw: None if name == tex else which(name, *a, **kw))
+    (tmp_path / "run.csv").write_text("")
+    assert main(["plot", str(tmp_path / "run.csv"), "--out", str(tmp_path / "p.pgf")]) == 2
+    assert capsys.readouterr().err == (f"rodctl: --out {tmp_path / 'p.pgf'}: a .pgf figure needs {tex} (LaTeX), "
+                                       "which is not installed; use .pdf or .svg\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.csv"]

@@ -20,7 +20,7 @@ def run_bench(args) -> int:
     unknown = groups - set(GROUPS)
     if unknown:
         raise InputError(f"--only {args.only}: unknown group(s) {', '.join(sorted(unknown))}; {', '.join(GROUPS)}")
-    if args.json:
+    if args.json is not None:  # an empty name is refused, not taken for no JSON
         from rodctl.cli.outputs import check_output
 
         check_output(args.json, "--json", force=args.force)  # before the measurements, not after them

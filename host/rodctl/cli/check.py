@@ -49,7 +49,7 @@ def run_check_command(args) -> int:
     from rodctl.check import run_check
     from rodctl.check.user import VirtualHand, user_for
 
-    if args.json:
+    if args.json is not None:  # an empty name is refused, not taken for no record
         check_output(args.json, "--json", force=args.force)
     params, label, flash = _design(args)
     say = lambda text: print(f"  {text}", file=sys.stderr, flush=True)  # noqa: E731

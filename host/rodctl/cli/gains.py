@@ -62,7 +62,7 @@ def buckling_warning(p: Params) -> str | None:
 
 def _write(path: Path, text: str) -> None:
     try:
-        path.write_text(text)
+        atomic_file.atomic_write(path, text)
     except OSError as e:
         raise InputError(f"writing {path} failed: {e.strerror or e}") from None
 
@@ -118,7 +118,7 @@ def run_gains(args) -> int:
 
 def run_params(args) -> int:
     text = params_from_args(args).to_toml()
-    if args.out:
+    if args.out is not None:  # an empty name (an unset shell variable) is refused, not taken for stdout
         check_output(args.out, "--out", force=args.force)
         _write(Path(args.out), text)
         print(f"wrote {args.out}")

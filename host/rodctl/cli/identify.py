@@ -14,7 +14,7 @@ from pathlib import Path
 from rodgains.errors import InputError
 
 from rodctl.cli.common import add_design_args, add_port_arg
-from rodctl.cli.outputs import check_output, make_folder
+from rodctl.cli.outputs import check_apart, check_name, check_output, make_folder
 from rodctl.ident.run import MAX_TRIES, RETRY_SCALE, SETTLE_S, SOFT_LIMIT_FRACTION
 
 
@@ -149,8 +149,11 @@ def plot_path(args) -> Path:
 
 def check_outputs(args) -> None:
     check_output(args.out, "--out", force=args.force)
+    if args.plot is not None:
+        check_name(args.plot, "--plot")  # an empty name is refused, not taken for the default
     # the figure is this run's too: an existing one (often from another rig's run) is kept unless --force
     check_output(plot_path(args), "--plot", force=args.force, figure=True)
+    check_apart(plot_path(args), "--plot", args.out, "--out")
 
 
 def run_identify(args) -> int:

@@ -7,14 +7,15 @@ from pathlib import Path
 
 
 def run_log_convert(args) -> int:
+    from rodctl.cli.outputs import check_name, check_output
     from rodctl.logs.reader import convert_log
     from rodctl.logs.writer import log_format
 
     src = Path(args.log)
+    if args.out is not None:
+        check_name(args.out, "--out")  # an empty name is refused, not taken for the default
     fmt = log_format(args.out, args.format) if args.out else (args.format or "parquet")
     out = Path(args.out) if args.out else src.with_suffix("." + fmt)
-    from rodctl.cli.outputs import check_output
-
     check_output(out, "--out", make_parent=True)  # before reading the log: the folder can be written
     convert_log(src, out, fmt=fmt, overwrite=args.force,
                 warn=lambda line: print(f"warning: {line}", file=sys.stderr))

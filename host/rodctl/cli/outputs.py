@@ -73,6 +73,17 @@ def check_figure_name(path: str | Path, what: str) -> None:
         raise InputError(f"{what} {path}: a figure's name needs an extension: {', '.join(known)}")
     if ext not in known:
         raise InputError(f"{what} {path}: matplotlib cannot write .{ext} figures; use one of: {', '.join(known)}")
+    if ext == "pgf":
+        # matplotlib draws .pgf text through LaTeX and finds it missing only once the figure is drawn, after
+        # a command's other files are written
+        import shutil
+
+        import matplotlib
+
+        tex = matplotlib.rcParams["pgf.texsystem"]
+        if shutil.which(tex) is None:
+            raise InputError(f"{what} {path}: a .pgf figure needs {tex} (LaTeX), which is not installed; "
+                             "use .pdf or .svg")
 
 
 def check_name(path: str | Path, what: str, *, figure: bool = False) -> Path:
@@ -109,6 +120,13 @@ def check_output(path: str | Path, what: str, *, force: bool | None = None, figu
     check_folder_writable(parent, f"{what} {path}")
 
 
+def check_apart(path: str | Path | None, what: str, other: str | Path | None, other_what: str) -> None:
+    """InputError when two outputs of one command name one file (None or '' entries skipped): the one written
+    last would replace the other."""
+    if path and other and Path(path).resolve() == Path(other).resolve():
+        raise InputError(f"{what} {path} is also the {other_what}: one would replace the other; name them apart")
+
+
 GENERATED_MARK = "DO NOT EDIT"
 
 
@@ -123,10 +141,10 @@ def check_not_input(path: str | Path, what: str, inputs) -> None:
 
 def check_regenerable(path: str | Path, what: str, *, force: bool, inputs=()) -> None:
     """InputError unless `path` may be written as a generated file: it is none of `inputs` (check_not_input),
-    and if it exists it is a file rodctl generated (GENERATED_MARK in its first lines, so a regenerate command
-    runs again as it is) or `force` is set."""
+    not a folder, and if it exists it is a file rodctl generated (GENERATED_MARK in its first lines, so a
+    regenerate command runs again as it is) or `force` is set."""
     check_not_input(path, what, inputs)
-    p = Path(path)
+    p = check_name(path, what)  # a folder in the way: --force cannot replace it, so the write would fail half-way
     if force or not (p.exists() or p.is_symlink()):
         return
     try:

@@ -13,6 +13,8 @@ from rodctl import paths
 def run_protocol(args) -> int:
     from rodctl.link import protocol_gen as gen
 
+    if args.root is not None and not args.root.strip():  # an unset shell variable is not this checkout
+        raise InputError("--root: empty folder name")
     if not args.root:
         paths.require_checkout("rodctl protocol (without --root)")
     root = Path(args.root) if args.root else paths.REPO

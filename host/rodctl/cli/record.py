@@ -21,6 +21,9 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
     check_duration(duration)
     fmt = None
     if out is not None:
+        from rodctl.cli.outputs import check_name
+
+        check_name(out, "--out")  # an empty name (an unset shell variable) is not the current folder
         fmt = log_format(out, getattr(args, "format", None))
         require_format(fmt)  # before touching the board
         check_new(out, fmt, getattr(args, "force", False))
@@ -83,7 +86,7 @@ def _disarm_note(session: Session) -> str:
 
 def run_log(args) -> int:
     fmt = args.format
-    out = args.out or default_log_name(fmt or "csv")
+    out = args.out if args.out is not None else default_log_name(fmt or "csv")
     arm = ARM_CHOICES[args.arm] if args.arm else None
     return stream(args, arm_mode=arm, out=out, what="log")
 

@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 from rodctl.cli.gains import add_param_args, params_from_args
-from rodctl.cli.outputs import check_output
+from rodctl.cli.outputs import check_apart, check_output
 from rodctl.paths import shown
 
 
@@ -31,6 +31,9 @@ def add_score_args(p) -> None:
 
 
 MAX_SECONDS = 600.0  # a run's simulated length, as `rodctl sim --duration`
+# Shorter runs hold fewer than 5 periods of the slowest loop (loop.rate_hz >= 100 Hz): below one period the
+# run has no samples at all, and the metrics need two.
+MIN_SECONDS = 0.05
 
 
 def check_score_args(args) -> None:
@@ -44,8 +47,8 @@ def check_score_args(args) -> None:
         raise InputError(f"--samples {args.samples}: must be between 0 and {MAX_SAMPLES:,}")
     if args.seed is not None and not 0 <= args.seed < 2**32:
         raise InputError(f"--seed {args.seed}: must be in 0 .. 2^32 - 1")
-    if args.seconds is not None and not 0 < args.seconds <= MAX_SECONDS:
-        raise InputError(f"--seconds {args.seconds:g}: must be in (0, {MAX_SECONDS:g}] s")
+    if args.seconds is not None and not MIN_SECONDS <= args.seconds <= MAX_SECONDS:
+        raise InputError(f"--seconds {args.seconds:g}: must be in [{MIN_SECONDS:g}, {MAX_SECONDS:g}] s")
 
 
 def command_line(argv_tail: list[str]) -> str:
@@ -121,6 +124,7 @@ def run_robustness(args) -> int:
         check_output(args.json, "--json", force=args.force)
     if args.plot:
         check_output(args.plot, "--plot", force=args.force, figure=True)
+    check_apart(args.plot, "--plot", args.json, "--json")
     units = S.units(params, args.cases, args.samples, args.seed, args.seconds, plant=plant)
     t0 = time.monotonic()
     with Runner(args.jobs, args.scheduler) as runner:

@@ -42,16 +42,17 @@ def check_scope_args(args) -> None:
     import math
 
     from rodctl.cli.common import check_duration
-    from rodctl.cli.outputs import check_output
+    from rodctl.cli.outputs import check_name, check_output
 
     check_duration(args.duration)
     if not (math.isfinite(args.window) and 0 < args.window <= 3600):
         raise InputError(f"--window {args.window:g}: must be in (0, 3600] s")
     if args.screenshot is not None:
         check_output(args.screenshot, "--screenshot", force=bool(args.force), figure=True)
-    if args.record:
+    if args.record is not None:
         from rodctl.logs.writer import check_new, log_format
 
+        check_name(args.record, "--record")  # an empty name is not the current folder
         check_new(args.record, log_format(args.record, args.format), args.force)
         check_output(args.record, "--record", make_parent=True)
     if getattr(args, "params", None) or getattr(args, "overrides", None):

@@ -18,7 +18,7 @@ def run_sil_lib(args) -> int:
     into_folder = bool(args.output) and (Path(args.output).is_dir() or args.output.endswith(("/", "\\")))
     if into_folder:  # before the build; the library's own name is known once built
         check_output_folder(args.output, f"--output {args.output}")
-    elif args.output:
+    elif args.output is not None:  # an empty name is refused, not taken for no copy
         check_output(args.output, "--output", make_parent=True, force=args.force)
     args.header = None  # the regenerate line names the parameters, not a header path
     lib = build_sil(params, command=regenerate_command(args))

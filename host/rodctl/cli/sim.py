@@ -113,8 +113,13 @@ def run_sim(args) -> int:
             mark = " (default)" if name == DEFAULT else ""
             print(f"{name:{width}s} {s.paper:7s} {s.title}{mark}")
         return 0
-    if args.duration is not None and not 0 < args.duration <= 600:
-        raise InputError(f"--duration {args.duration}: must be in (0, 600] s")
+    from rodctl.cli.robustness import MAX_SECONDS, MIN_SECONDS
+
+    if args.duration is not None and not MIN_SECONDS <= args.duration <= MAX_SECONDS:
+        raise InputError(f"--duration {args.duration:g}: must be in [{MIN_SECONDS:g}, {MAX_SECONDS:g}] s")
+    for flag, name in (("--plot", args.plot), ("--log", args.log)):
+        if name is not None:
+            check_name(name, flag)  # an empty name is refused, not taken for the default sim-NAME one
     params = params_from_args(args)
     shorthand = ([f'plant.model="{args.plant}"'] if args.plant is not None else []) + \
         ([f"plant.edges={args.edges}"] if args.edges is not None else [])

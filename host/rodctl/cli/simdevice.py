@@ -18,7 +18,7 @@ def run_sim_device(args) -> int:
     from rodctl.sim.device import RealTimeRunner, VirtualDevice
 
     check_duration(args.duration)
-    if args.link:
+    if args.link is not None:  # an empty name is refused, not taken for no link
         check_link(args.link)
     if not hasattr(os, "openpty"):
         raise UserError("sim-device --pty needs a POSIX system (pseudo-terminals)")
@@ -118,8 +118,10 @@ def run_sim_device(args) -> int:
 def check_link(path: str) -> None:
     """--link PATH, before the board starts: a symlink there is replaced; anything else is refused, and
     its folder must exist and be writable (InputError, exit 2)."""
-    from rodctl.cli.outputs import check_output
+    from rodctl.cli.outputs import check_name, check_output
 
+    if not path.strip():
+        check_name(path, "--link")  # an empty name, not the current folder
     link = Path(path)
     if link.exists() and not link.is_symlink():
         raise InputError(f"--link {link} exists and is not a symlink; name another path")

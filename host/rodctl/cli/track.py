@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from rodgains.atomic_file import replacing
 from rodgains.errors import InputError
 
 from rodctl.cli.outputs import check_output
@@ -17,6 +18,8 @@ def _pair(text: str | None, what: str) -> tuple[float, float] | None:
         x, y = (float(v) for v in text.split(","))
     except ValueError:
         raise InputError(f"{what} {text!r}: expected X,Y") from None
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise InputError(f"{what} {text!r}: expected X,Y in pixels, finite numbers")
     return x, y
 
 
@@ -73,7 +76,7 @@ def run_track_command(args) -> int:
         raise InputError(f"--out {out}: the tracked log is Parquet (.parquet); its MCAP goes beside it")
     check_output(out, "--out", force=args.force)
     check_output(out.with_suffix(".mcap"), "--out's MCAP", force=args.force)
-    if args.plot:
+    if args.plot is not None:  # an empty name is refused, not taken for no figure
         check_output(args.plot, "--plot", figure=True, force=args.force)
     for path, what in ((args.video, "video"), (args.log, "--log")):
         if Path(path).is_dir():
@@ -95,16 +98,19 @@ def run_track_command(args) -> int:
         print(f"calibration: {args.calibrate}, reprojection {view.rms_px:.2f} px, k1 {view.dist.ravel()[0]:+.3f}")
 
     bar = None
-    if not args.quiet:
-        from rodctl.progress import bar as progress_bar
-
-        bar = progress_bar(total=None, desc="track", unit="frame", leave=False)
 
     def progress(k, total):
-        if bar is not None:
-            if bar.total is None and total:
-                bar.total = total
-            bar.update(k - bar.n)
+        # the bar starts with the first frame read: a refused log or video is its one line of error, nothing else
+        nonlocal bar
+        if args.quiet:
+            return
+        if bar is None:
+            from rodctl.progress import bar as progress_bar
+
+            bar = progress_bar(total=total or None, desc="track", unit="frame", leave=False)
+        if bar.total is None and total:
+            bar.total = total
+        bar.update(k - bar.n)
 
     try:
         r = track(args.video, args.log, params, markers=args.markers, color=color, hub=hub, scale=args.scale,
@@ -141,7 +147,8 @@ def run_track_command(args) -> int:
         length = float((params or load_params())["rod"]["length"])
         fig = tracking_figure(r.time_s, r.theta, r.estimate, length, times,
                               f"{Path(args.video).name} against {Path(args.log).name}")
-        fig.savefig(args.plot, dpi=110)
+        with replacing(args.plot) as tmp:  # whole or not at all, as the tracked logs
+            fig.savefig(tmp, dpi=110, format=Path(args.plot).suffix.lstrip(".").lower())
         written.append(args.plot)
     print(f"wrote {', '.join(written)}")
     return 0

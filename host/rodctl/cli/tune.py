@@ -47,8 +47,8 @@ def run_tune(args) -> int:
     if args.budget < 1:
         raise InputError(f"--budget {args.budget}: must be >= 1")
     check_output(args.out, "--out", force=args.force)
-    if args.study:
-        check_output_folder(args.study, f"--study {args.study}")
+    if args.study is not None:  # an empty name is refused: it would put the study in the current folder
+        check_output_folder(args.study, f"--study {args.study}".rstrip())
     dims = T.space(args.only, params)
     seed = params["uncertainty"]["seed"] if args.seed is None else args.seed
     samples = params["uncertainty"]["samples"] if args.samples is None else args.samples

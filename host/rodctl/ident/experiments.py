@@ -178,11 +178,15 @@ def records_from_rows(rows: np.ndarray, period: float, name: str, sha256: str) -
     return out
 
 
+RECORD_COLUMNS = ["mode_code", "device_time_us", "encoder_count", "duty_frac", "torque_Nm", "base_rate_rad_s",
+                  "reason_code"]  # what records_from_rows reads
+
+
 def records_from_log(path: str | Path, period: float | None = None) -> tuple[dict, list[Record]]:
     """(metadata, IDENTIFY records) of a recorded log."""
     from rodctl.logs import read_log
 
-    meta, rows = read_log(path)
+    meta, rows = read_log(path, columns=RECORD_COLUMNS)  # a log without one is "no column X", before the fit
     if period is None:
         period = float(meta.get("period_us", 1000)) * 1e-6
     return meta, records_from_rows(rows, period, Path(path).stem, file_sha256(path))

@@ -12,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
+from rodgains.atomic_file import atomic_write
 from rodgains.errors import InputError
 
 
@@ -131,7 +132,7 @@ def fit_logs(logs: list[Path], params=None, source: str = "", *, nominal, out: P
     choice = _choose_compensation(identified, cases, jobs, say, show)
     verdict = _verdict(R.written_params(params, res, choice), cases, jobs, say)
     lines = verdict.lines(str(out))
-    out.write_text(R.parameter_file(params, res, digests, compensation=choice, verdict=lines))
+    atomic_write(out, R.parameter_file(params, res, digests, compensation=choice, verdict=lines))
     R.figure(res, plot)
     show(f"wrote {out} and {plot}")
     for name, why in res.out_of_range.items():

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rodgains.atomic_file import replacing
+
 from rodctl.ident.fit import FIT_PARAMS, FitResult, validation_text, with_values
 
 
@@ -126,6 +128,7 @@ def figure(res: FitResult, path: str | Path) -> Path:
     fig.suptitle(f"rodctl identify: validation on held-out data: {validation_text(res.validation_fit_pct)}")
     fig.tight_layout()
     path = Path(path)
-    fig.savefig(path, dpi=110)
+    with replacing(path) as tmp:  # whole or not at all, as the parameter file beside it
+        fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".").lower() or "png")
     plt.close(fig)
     return path

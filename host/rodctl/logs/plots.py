@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rodgains.atomic_file import replacing
 from rodgains.errors import InputError
 
 from rodctl.link import protocol as P
@@ -194,8 +195,8 @@ def save_figure(fig, out: str | Path, dpi: int = 110) -> Path:
     out = Path(out)
     FigureCanvasAgg(fig)
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(out, dpi=dpi)
+        with replacing(out) as tmp:  # whole or not at all: a failed draw leaves no cut figure
+            fig.savefig(tmp, dpi=dpi, format=out.suffix.lstrip(".").lower() or "png")
     except OSError as e:
         raise InputError(f"cannot write {out}: {e.strerror or e}") from None
     return out

@@ -143,6 +143,15 @@ def _events_array(events) -> np.ndarray:
     return out
 
 
+def _check_edges(path: Path, names: list[str]) -> None:
+    """InputError unless the estimate's columns are theta_hat_1_rad .. theta_hat_N_rad with none missing:
+    readers take N from how many there are (schema.n_edges_of)."""
+    n = schema.n_edges_of(names)
+    for i in range(1, n + 1):
+        if f"theta_hat_{i}_rad" not in names:
+            raise InputError(f"{path}: no column theta_hat_{i}_rad (of {n} theta_hat columns, one per edge)")
+
+
 def read_log(path: str | Path, columns: list[str] | None = None) -> Log:
     """(metadata, data) of a log; data is a numpy structured array with one row per telemetry frame.
 
@@ -168,8 +177,13 @@ def read_log(path: str | Path, columns: list[str] | None = None) -> Log:
             if missing:
                 raise InputError(f"{path}: no column {missing[0]}")
     order = names if names is not None else list(cols)
+    if columns is None or any("*" in c for c in columns):
+        _check_edges(path, order)
     data = _to_numpy(path, cols, order)
     del cols
+    if "time_s" in order and not np.isfinite(data["time_s"]).all():
+        k = int(np.argmin(np.isfinite(data["time_s"])))
+        raise InputError(f"{path}: time_s of telemetry row {k + 1} is {data['time_s'][k]}, not a time")
     if "seq_count" in order and data.size and np.any(np.diff(data["seq_count"]) < 0):
         meta["seq_restarts"] = meta.get("seq_restarts", "1")
     trailer = meta.pop(schema.TRAILER_KEY, None) or {}
@@ -210,11 +224,11 @@ def convert_log(src: str | Path, out: str | Path, fmt: str | None = None, overwr
                                                           "closed_utc", *log.trailer)}
     meta["converted_from"] = str(src)
     n = schema.n_edges_of(log.data.dtype.names)
-    w = LogWriter(out, meta, n=n, fmt=fmt, overwrite=overwrite)
     want = schema.column_names(n)
     missing = [c for c in want if c not in log.data.dtype.names]
-    if missing:
+    if missing:  # before the writer makes its files: a refused log leaves none behind
         raise InputError(f"{src}: no column {missing[0]}; cannot convert")
+    w = LogWriter(out, meta, n=n, fmt=fmt, overwrite=overwrite)
     rows = log.data[want].tolist()
     ev = log.events.tolist()
     with w._lock:

@@ -97,7 +97,7 @@ def space(only: str | None = None, params: Params | None = None) -> tuple[Dim, .
     robust = params is not None and params["design"]["method"] == "robust"
     known = tuple(d for d in SPACE if d.name.split(".")[1] in SCHEMA.get(d.name.split(".")[0], {})
                   and (robust or d.name not in ROBUST_ONLY))
-    if not only:
+    if only is None:  # --only '' searches nothing, and is refused below
         return known
     names = [x.strip() for x in only.split(",") if x.strip()]
     by = {d.name: d for d in known}

@@ -46,6 +46,22 @@ _POOL_LOCK = threading.Lock()
 _POOL: dict[str, list[ctypes.CDLL]] = {}
 
 
+def _eeprom_file(eeprom: str | None) -> Path | None:
+    """eeprom=PATH of a sim:// URL: a file, or one that can be made in an existing folder (InputError)."""
+    if not eeprom:
+        return None
+    from rodgains.errors import InputError
+
+    path = Path(eeprom)
+    if path.is_dir():
+        raise InputError(f"eeprom={eeprom}: is a folder; name the EEPROM's file")
+    if not path.parent.is_dir():
+        raise InputError(f"eeprom={eeprom}: folder {path.parent} does not exist")
+    if path.exists() and not os.access(path, os.R_OK):
+        raise InputError(f"eeprom={eeprom}: cannot read it")
+    return path
+
+
 def _prototype(lib: ctypes.CDLL) -> ctypes.CDLL:
     f, i, u32, i32, sz = ctypes.c_float, ctypes.c_int, ctypes.c_uint32, ctypes.c_int32, ctypes.c_size_t
     protos = {
@@ -111,6 +127,7 @@ class VirtualDevice:
             from rodgains.errors import InputError
 
             raise InputError(f"unknown plant {plant!r}: choose one of {', '.join(PLANT_KINDS)}")
+        eeprom_path = _eeprom_file(eeprom)  # before the build: a SAVE_RIG must not stop the board later
         # The same parameters build the firmware and the plant: `--params/--set` describe this rod.
         self.params = params if params is not None else load_params(params_path, list(overrides))
         # plant= and edges= are shorthands for the [plant] table, as `rodctl sim --plant/--edges` are.
@@ -153,7 +170,7 @@ class VirtualDevice:
         self.lib.rod_dev_reset(tx_capacity)
         # The board's EEPROM: what SAVE_RIG stored, read back at power-on (a file with eeprom=PATH,
         # else blank at every power-on and kept in memory while the board runs).
-        self.eeprom_path = Path(eeprom) if eeprom else None
+        self.eeprom_path = eeprom_path
         self.eeprom = self.eeprom_path.read_bytes() if self.eeprom_path and self.eeprom_path.is_file() else b""
         self.lib.rod_dev_load_rig(self.eeprom or None, len(self.eeprom))
         self._save_buf = ctypes.create_string_buffer(RIG_STORE_BYTES)
@@ -252,10 +269,12 @@ class VirtualDevice:
             self._store(self._save_buf.raw[:n])
 
     def _store(self, data: bytes) -> None:
-        """SAVE_RIG: the bytes the board writes to its EEPROM."""
+        """SAVE_RIG: the bytes the board writes to its EEPROM (the file whole, or as it was)."""
+        from rodgains.atomic_file import atomic_write
+
         self.eeprom = data
         if self.eeprom_path is not None:
-            self.eeprom_path.write_bytes(data)
+            atomic_write(self.eeprom_path, data)
 
     def read(self) -> bytes:
         """Device bytes the board's USB would send now (whole frames)."""

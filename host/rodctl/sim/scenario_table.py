@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from rodgains.atomic_file import atomic_write
 from rodgains.errors import InputError
 
 TABLE_BEGIN = "<!-- BEGIN scenario table: regenerate with `rodctl sim --all --figures docs/img --table docs/scenarios.md` -->"
@@ -50,4 +51,4 @@ def replace_table(readme: Path, table: str) -> None:
     check_markers(readme, text)
     start = text.index(TABLE_BEGIN)
     end = text.index(TABLE_END) + len(TABLE_END)
-    readme.write_text(text[:start] + f"{TABLE_BEGIN}\n{table}{TABLE_END}" + text[end:])
+    atomic_write(readme, text[:start] + f"{TABLE_BEGIN}\n{table}{TABLE_END}" + text[end:])

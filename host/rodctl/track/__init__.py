@@ -213,7 +213,7 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     from rodctl.logs import read_log
     from rodctl.logs.metadata import counts_per_rev_of, params_of
 
-    log = read_log(log_path)
+    log = read_log(log_path, columns=["time_s", "mode_code", "encoder_count", "theta_hat_*"])  # what it compares
     data = log.data
     if data.size < 2:
         raise InputError(f"{log_path}: no telemetry to align the video with")
