@@ -20,7 +20,7 @@ import numpy as np
 from rodgains.errors import InputError
 
 from rodctl.logs import csvlog, mcaplog, parquetlog, schema
-from rodctl.logs.writer import EXTENSIONS, LogWriter, log_format
+from rodctl.logs.writer import EXTENSIONS, LogWriter
 
 
 class Log(tuple):
