@@ -92,6 +92,19 @@ class RateMeter:
 MAX_WALL_DURATION_S = 7 * 86400.0
 
 
+# A simulated run's length [s] (`sim --duration`, `robustness` / `sweep` / `tune --seconds`). Shorter runs hold
+# fewer than 5 periods of the slowest loop (loop.rate_hz >= 100 Hz): below one period the run has no samples at
+# all, and the metrics need two.
+MIN_SIM_SECONDS = 0.05
+MAX_SIM_SECONDS = 600.0
+
+
+def check_sim_seconds(seconds: float | None, flag: str) -> None:
+    """A simulated run's length [s], None for the default; out of [MIN_SIM_SECONDS, MAX_SIM_SECONDS]: InputError."""
+    if seconds is not None and not MIN_SIM_SECONDS <= seconds <= MAX_SIM_SECONDS:
+        raise InputError(f"{flag} {seconds:g}: must be in [{MIN_SIM_SECONDS:g}, {MAX_SIM_SECONDS:g}] s")
+
+
 def check_duration(seconds: float | None) -> None:
     """--duration [s] of wall time: None runs until stopped; anything else must be in (0, a week]
     (InputError, exit 2): inf or 1e300 would only be "until stopped" spelt as a number."""

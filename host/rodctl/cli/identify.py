@@ -151,9 +151,10 @@ def check_outputs(args) -> None:
     check_output(args.out, "--out", force=args.force)
     if args.plot is not None:
         check_name(args.plot, "--plot")  # an empty name is refused, not taken for the default
+    plot = plot_path(args)
     # the figure is this run's too: an existing one (often from another rig's run) is kept unless --force
-    check_output(plot_path(args), "--plot", force=args.force, figure=True)
-    check_apart(plot_path(args), "--plot", args.out, "--out")
+    check_output(plot, "--plot", force=args.force, figure=True)
+    check_apart(plot, "--plot", args.out, "--out")
 
 
 def run_identify(args) -> int:

@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+from rodctl.cli.common import check_sim_seconds
 from rodctl.cli.gains import add_param_args, params_from_args
 from rodctl.cli.outputs import check_apart, check_output
 from rodctl.paths import shown
@@ -30,12 +31,6 @@ def add_score_args(p) -> None:
                    help="simulated length of every run [s] (default: the matrix's for each task)")
 
 
-MAX_SECONDS = 600.0  # a run's simulated length, as `rodctl sim --duration`
-# Shorter runs hold fewer than 5 periods of the slowest loop (loop.rate_hz >= 100 Hz): below one period the
-# run has no samples at all, and the metrics need two.
-MIN_SECONDS = 0.05
-
-
 def check_score_args(args) -> None:
     from rodgains.errors import InputError
     from rodgains.params import MAX_SAMPLES
@@ -47,8 +42,7 @@ def check_score_args(args) -> None:
         raise InputError(f"--samples {args.samples}: must be between 0 and {MAX_SAMPLES:,}")
     if args.seed is not None and not 0 <= args.seed < 2**32:
         raise InputError(f"--seed {args.seed}: must be in 0 .. 2^32 - 1")
-    if args.seconds is not None and not MIN_SECONDS <= args.seconds <= MAX_SECONDS:
-        raise InputError(f"--seconds {args.seconds:g}: must be in [{MIN_SECONDS:g}, {MAX_SECONDS:g}] s")
+    check_sim_seconds(args.seconds, "--seconds")
 
 
 def command_line(argv_tail: list[str]) -> str:

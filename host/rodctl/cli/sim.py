@@ -113,10 +113,9 @@ def run_sim(args) -> int:
             mark = " (default)" if name == DEFAULT else ""
             print(f"{name:{width}s} {s.paper:7s} {s.title}{mark}")
         return 0
-    from rodctl.cli.robustness import MAX_SECONDS, MIN_SECONDS
+    from rodctl.cli.common import check_sim_seconds
 
-    if args.duration is not None and not MIN_SECONDS <= args.duration <= MAX_SECONDS:
-        raise InputError(f"--duration {args.duration:g}: must be in [{MIN_SECONDS:g}, {MAX_SECONDS:g}] s")
+    check_sim_seconds(args.duration, "--duration")
     for flag, name in (("--plot", args.plot), ("--log", args.log)):
         if name is not None:
             check_name(name, flag)  # an empty name is refused, not taken for the default sim-NAME one
