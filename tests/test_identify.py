@@ -69,6 +69,11 @@ def truth(name: str) -> dict[str, float]:
             "zero_error": h.get("encoder.zero_error_deg", nom["encoder"]["zero_error_deg"])}
 
 
+# The records and fits below are cached per process: the tests that read them run on one pytest-xdist worker
+# (`--dist loadgroup`, .ci/run), so each rig is fitted once, not once per worker.
+SHARES_THE_FITS = pytest.mark.xdist_group("hidden_rig_fits")
+
+
 @lru_cache(maxsize=None)
 def sil() -> SilController:
     return SilController(build_sil(load_params()))  # the firmware of the nominal (user's) parameters
@@ -85,6 +90,7 @@ def fitted(name: str) -> F.FitResult:
     return F.fit(list(records(name)), load_params(), starts=1)
 
 
+@SHARES_THE_FITS
 @pytest.mark.parametrize("name", ["A", "B", "C", "D", "F"])
 def test_fit_recovers_a_hidden_rig(name):
     recs = list(records(name))
@@ -152,6 +158,7 @@ def test_a_record_starts_with_the_rod_hanging_as_far_as_the_play_lets_it(enc_deg
     assert np.allclose(np.degrees(out.state()[0]), 1.5), "an output-shaft encoder reads the rod itself"
 
 
+@SHARES_THE_FITS
 def test_the_polish_on_the_files_plant_removes_the_fast_rods_bias():
     """The starts search on the inextensible N = 20 rod; the rig is a DER N = 30 rod. On rig D that
     mismatch alone puts the viscous friction more than 5 % off; the polish on the file's plant recovers it."""
@@ -212,6 +219,7 @@ def test_an_experiment_that_trips_stops_the_motor_with_its_reason():
     assert rec.seconds < strong.duration
 
 
+@SHARES_THE_FITS
 def test_a_value_outside_its_physical_range_is_flagged_not_written():
     recs = list(records("A"))
     res = F.fit(recs, load_params(), starts=1, max_nfev=3, polish=False)
@@ -224,6 +232,7 @@ def test_a_value_outside_its_physical_range_is_flagged_not_written():
     assert "rotor_inertia = 5e-07" in text and "NOT WRITTEN" in text and "0" * 64 in text
 
 
+@SHARES_THE_FITS
 def test_written_file_is_complete_and_loads(tmp_path):
     res = F.fit(list(records("A")), load_params(), starts=1, max_nfev=3, polish=False)
     f = tmp_path / "my_rod.toml"
@@ -370,6 +379,7 @@ def _identified(name: str, tmp_path):
     return load_params(f)
 
 
+@SHARES_THE_FITS
 def test_the_design_for_the_identified_rig_passes_on_the_hidden_plant(tmp_path):
     """Issue 10: design from the identified file, judge it on the hidden rig (`rodctl robustness --plant`),
     here on the quick case set (docs/identification.md: the whole matrix on rigs A, B, C)."""
@@ -384,6 +394,7 @@ def test_the_design_for_the_identified_rig_passes_on_the_hidden_plant(tmp_path):
             assert r["passed"], r
 
 
+@SHARES_THE_FITS
 def test_a_case_the_default_design_drops_on_a_hidden_rig_holds_with_the_identified_design(tmp_path):
     """Rig C (a stiffer rod, E = 7.2e5 Pa) ten times more damped: the default design, which assumes Table I's
     rod, trips the angle limit; the design for the identified rig holds the rod."""
@@ -397,6 +408,7 @@ def test_a_case_the_default_design_drops_on_a_hidden_rig_holds_with_the_identifi
     assert mine["passed"] and mine["fault_reason"] == 0 and mine["final_dev_deg"] < SETTLE_DEG, mine
 
 
+@SHARES_THE_FITS
 def test_identify_says_how_far_the_identified_rod_is_from_buckling(tmp_path):
     """Rig B's rod above the hub is 0.98 x its clamped buckling length; rig A's 0.91 x, and no matrix case
     takes A past it."""
@@ -561,6 +573,7 @@ def test_held_out_data_that_holds_still_is_said_so_not_nan():
     assert validation_text(percent_fit(moving, 0.99 * moving)) == "99.0 % fit"
 
 
+@SHARES_THE_FITS
 def test_the_polish_simulates_the_files_plant_where_the_search_left_off():
     """The polish starts where the search on the fast rod ended: its first residual must be the file's plant's,
     not the fast rod's last one handed back by the residual's cache."""

@@ -12,7 +12,7 @@ from rodgains.params import load_params
 
 from host_tools import run_rodctl
 from rodctl.ident import compensation as C
-from test_identify import _identified, hidden_params
+from test_identify import SHARES_THE_FITS, _identified, hidden_params
 
 
 def _row(case, task, passed, settle=None):
@@ -185,6 +185,7 @@ def test_on_rig_s4_1_only_the_stiffer_shaft_holds_the_damped_rod_soon():
     assert ends[400.0]["passed"] and ends[400.0]["final_dev_deg"] < 0.5 and ends[400.0]["settle_s"] < 4.0, ends[400.0]
 
 
+@SHARES_THE_FITS
 def test_rig_a_meets_the_nominal_goals_with_the_chosen_compensation(tmp_path):
     """Rig A (T_c 4 mN m) with an ideal gearbox: the identified file with the nominal 7.4 mN m settles balance
     in 1.64 s (goal 1.5 s). The compensation chosen on the identified rig meets both nominal goals on the
