@@ -48,11 +48,6 @@ def test_sources_are_python_310():
             assert m is None, f"{f.relative_to(ROOT)} uses {m.group(0)!r}, newer than Python 3.10"
 
 
-# the wheel is built and installed once (module fixtures):
-# every test here runs on one pytest-xdist worker (.ci/run: --dist loadgroup)
-pytestmark = pytest.mark.xdist_group("wheel")
-
-
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory):
     pytest.importorskip("setuptools")

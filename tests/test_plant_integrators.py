@@ -57,11 +57,6 @@ def test_choice_follows_stiffness():
 
 # --- accuracy against Radau ---------------------------------------------------------------------
 
-# the reference solution is integrated once (module fixture):
-# every test here runs on one pytest-xdist worker (.ci/run: --dist loadgroup)
-pytestmark = pytest.mark.xdist_group("plant_reference")
-
-
 @pytest.fixture(scope="module")
 def ref_inextensible_5():
     plant = Plant(P, edges=5)

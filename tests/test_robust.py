@@ -29,11 +29,6 @@ def quick_units(samples=2):
     return S.units(load_params(), "quick", samples=samples, seed=7, seconds=SECONDS)
 
 
-# the local pool's rows are computed once (module fixture):
-# every test here runs on one pytest-xdist worker (.ci/run: --dist loadgroup)
-pytestmark = pytest.mark.xdist_group("robust_rows")
-
-
 @pytest.fixture(scope="module")
 def local_rows():
     from rodctl.build.sil_build import build_sil

@@ -17,11 +17,6 @@ RUNS = [(c.name, t) for t in matrix.TASKS for c in matrix.cases_for(t)]
 IDEAL = load_params().with_overrides(*matrix.IDEAL_GEARBOX)
 
 
-# the whole matrix runs once (module fixture, about 95 s):
-# every test here runs on one pytest-xdist worker (.ci/run: --dist loadgroup)
-pytestmark = pytest.mark.xdist_group("matrix")
-
-
 @pytest.fixture(scope="module")
 def results():
     p = load_params()

@@ -17,11 +17,6 @@ FPS = (60, 120, 240)
 SECONDS = {60: 20.0, 120: 6.0, 240: 6.0}  # at 60 fps the clock's drift needs more swinging (docs/howto/film-a-run.md)
 
 
-# the videos are rendered and tracked once (module fixtures, about 90 s):
-# every test here runs on one pytest-xdist worker (.ci/run: --dist loadgroup)
-pytestmark = pytest.mark.xdist_group("track_films")
-
-
 @pytest.fixture(scope="module")
 def filmed(tmp_path_factory):
     """One simulated run filmed at each rate (the camera's clock 0.6 s late and 60 ppm slow)."""
