@@ -106,8 +106,8 @@ def _run(name: str, cmd: list[str], tmp: Path, cwd: Path | None = None) -> None:
 def _objects(name: str, cc: str, cflags: list[str], n_include: int, sources: list[Path], obj_dir: Path) -> list[Path]:
     """Each source's object in obj_dir, compiled only when no object of the same preprocessed text exists.
     The key is the text without line markers (-P) and the flags but the include folders (the last
-    n_include of cflags), so a header with the same content in another folder is no change; the object is compiled from the source itself, so warnings and
-    errors point at its lines."""
+    n_include of cflags), so a header with the same content in another folder is no change. The object
+    is compiled from the source itself, so warnings and errors point at its lines."""
     if len({s.stem for s in sources}) < len(sources):
         raise ValueError(f"{name}: two sources with one name: {sorted(s.name for s in sources)}")
     objects = []
@@ -115,7 +115,8 @@ def _objects(name: str, cc: str, cflags: list[str], n_include: int, sources: lis
         pre = subprocess.run([cc, *cflags, "-E", "-P", str(src)], capture_output=True)
         if pre.returncode != 0:
             raise UserError(f"compiling {name} failed: {first_error(pre.stderr.decode(errors='replace'))}")
-        key = _digest([cc.encode(), " ".join(cflags[:len(cflags) - n_include]).encode(), src.name.encode(), pre.stdout])
+        flags = " ".join(cflags[:len(cflags) - n_include])
+        key = _digest([cc.encode(), flags.encode(), src.name.encode(), pre.stdout])
         objects.append(obj_dir / f"{src.stem}-{key}.o")
     missing = [(src, obj) for src, obj in zip(sources, objects) if not obj.exists()]
     if missing:  # one compiler run for all of them: gcc -c writes each X.c's X.o into its working folder
