@@ -14,6 +14,7 @@ from rodgains.params import DEFAULT_PARAMS, load_params
 
 from host_tools import run_rodctl
 from rodctl.build.sil_build import build_sil
+from rodctl.ident import compensation as C
 from rodctl.ident import experiments as E
 from rodctl.ident import fit as F
 from rodctl.ident import report as R
@@ -420,8 +421,6 @@ def test_rig_a_meets_the_nominal_goals_with_the_chosen_compensation(tmp_path):
     hidden = hidden_params("A").with_overrides(*IDEAL_GEARBOX)
     before = run_case(mine, CASES["nominal"], "balance", plant_params=hidden)
     assert not before["passed"] and before["settle_s"] > BALANCE_SETTLE_GOAL_S, before
-    from rodctl.ident import compensation as C
-
     choice = C.choose(mine, cases="nominal", jobs=2, progress=False)
     tc = mine["motor"]["coulomb_friction"]
     assert choice.best.torque_nm == pytest.approx(choice.best.ratio * tc)

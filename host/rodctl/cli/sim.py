@@ -8,6 +8,7 @@ from pathlib import Path
 
 from rodgains.errors import InputError
 
+from rodctl.cli.common import check_sim_seconds
 from rodctl.cli.gains import add_param_args, params_from_args
 from rodctl.cli.outputs import check_name, check_output, make_folder
 
@@ -113,8 +114,6 @@ def run_sim(args) -> int:
             mark = " (default)" if name == DEFAULT else ""
             print(f"{name:{width}s} {s.paper:7s} {s.title}{mark}")
         return 0
-    from rodctl.cli.common import check_sim_seconds
-
     check_sim_seconds(args.duration, "--duration")
     for flag, name in (("--plot", args.plot), ("--log", args.log)):
         if name is not None:
