@@ -29,24 +29,18 @@ HOLD_DEG = 3.0  # every link within this of upright at the end [deg]: the robust
 RK4_STABILITY = 2.0  # RK4 is stable to |lambda h| = 2.78; substeps keep the stiffest mode below this [-]
 
 
-def release(p: Params, dt: float, Ao, Bo, Co, K, L, start_deg: float | None = None,
-            seconds: float = SECONDS, rod_params: Params | None = None, gain: float = 1.0, delay: int = 0) -> dict:
-    """Release the design model from start_deg (default: the catch angle) under the sampled loop
-    (Ao, Bo, Co, K, L as Design.estimator() returns them). Returns fell (theta_1 beyond
-    safety.angle_limit_deg), fell_at_s, final_deg (largest |link - upright| over the last
-    FINAL_WINDOW_S; None when it fell) and holds (did not fall, final_deg <= HOLD_DEG).
-    rod_params: the rod simulated, if not p's; gain: torque reaching it per torque commanded [-];
-    delay: extra control periods before a command reaches it."""
-    case = {"rod_params": rod_params, "gain": gain, "delay": delay}
-    return releases(p, dt, Ao, Bo, Co, K, L, [case], start_deg, seconds)[0]
-
-
 def releases(p: Params, dt: float, Ao, Bo, Co, K, L, cases: list[dict], start_deg: float | None = None,
              seconds: float = SECONDS) -> list[dict]:
-    """release() of each case (a dict of its rod_params, gain and delay), in order. The cases are integrated
-    side by side, one array operation for all of them, at the finest RK4 substep any of their rods needs:
-    the guard's four releases cost about what one did (a 30 % lighter rotor needs no finer step, a less
-    damped rod a coarser one)."""
+    """Release the design model from start_deg (default: the catch angle) under the sampled loop
+    (Ao, Bo, Co, K, L as Design.estimator() returns them), once per case: a dict of rod_params (the rod
+    simulated, if not p's), gain (torque reaching it per torque commanded [-]) and delay (extra control
+    periods before a command reaches it). Returns, per case in order: fell (theta_1 beyond
+    safety.angle_limit_deg), fell_at_s, final_deg (largest |link - upright| over the last FINAL_WINDOW_S;
+    None when it fell) and holds (did not fall, final_deg <= HOLD_DEG).
+
+    The cases are integrated side by side, one array operation for all of them, at the finest RK4
+    substep any of their rods needs: the guard's four releases cost about what one alone does (a 30 %
+    lighter rotor needs no finer step, a less damped rod a coarser one)."""
     rods = [RodModel.from_params(c.get("rod_params") or p, design=True).kelvin_voigt() for c in cases]
     sub = max(max(1, math.ceil(_stiffest_rate(rod) * dt / RK4_STABILITY)) for rod in rods)
     return _release_together(p, dt, Ao, Bo, Co, K, L, _Family(rods), sub, cases, start_deg, seconds)
@@ -101,7 +95,7 @@ class _Family:
 
 def _release_together(p: Params, dt: float, Ao, Bo, Co, K, L, family: _Family, sub: int, cases: list[dict],
                       start_deg: float | None, seconds: float) -> list[dict]:
-    """release() of cases whose rods form `family`, integrated with `sub` RK4 substeps per period."""
+    """releases() of cases whose rods form `family`, integrated with `sub` RK4 substeps per period."""
     N, B = family.N, len(cases)
     start = math.radians(p["swing_up"]["catch_angle_deg"] if start_deg is None else start_deg)
     limit = math.radians(p["safety"]["angle_limit_deg"])
@@ -158,12 +152,12 @@ def _release_together(p: Params, dt: float, Ao, Bo, Co, K, L, family: _Family, s
 
 
 def guard(p: Params, dt: float, Ao, Bo, Co, K, L) -> dict:
-    """The robust design's large-signal guard: release from the catch angle (release()) on the
+    """The robust design's large-signal guard: release from the catch angle (releases()) on the
     nominal design model, which must end within HOLD_DEG, and on the corners of the [uncertainty]
     table that pull hardest the other way, which must not fall: the torque low with one period of
     delay on a heavy rotor together, a light rotor, and the rod's damping at its low end.
-    Returns holds and the release() of every case up to the first that fails, in order (all four
-    are integrated together, releases())."""
+    Returns holds and the release of every case up to the first that fails, in order (all four are
+    integrated together)."""
     u, m, r = p["uncertainty"], p["motor"], p["rod"]
     J = m["rotor_inertia"]
     cases = [("nominal", {}, True),
