@@ -3,6 +3,7 @@ real-time factors, rates. Scratch files (a long log, a rendered clip) go under r
 
 from __future__ import annotations
 
+import os
 import statistics
 import subprocess
 import sys
@@ -33,6 +34,8 @@ GOALS = {
     "plot_peak_memory_mb": (1000, "<=", "MB", "peak resident memory of that `rodctl plot` process"),
     "robustness_runs_per_s_per_core": (None, "", "runs/s", "matrix runs (both tasks) on one local worker"),
     "robustness_scaling_1_to_2_workers": (1.7, ">=", "x", "matrix runs/s with 2 local workers / with 1"),
+    "robust_design_seconds": (None, "", "s", "`rodctl gains --set design.method=robust` from an empty design cache, "
+                              "wall time with interpreter start (the refinement and its large-signal guard)"),
     "nominal_balance_settle_s": (1.5, "<=", "s", "faithful plant (1 deg of play), from 30 deg, every link within 1 deg"),
     "nominal_balance_final_deg": (1.0, "<=", "deg", "its largest link deviation over the last 0.5 s"),
     "nominal_swingup_catch_s": (5.0, "<=", "s", "faithful plant, swing-up from rest to the catch"),
@@ -56,16 +59,25 @@ GROUPS = ("gains", "m4", "sil", "host", "robust", "control", "track")
 
 
 def _gains_seconds(edges: int, repeats: int = 3) -> float:
-    walls = []
+    return statistics.median(_gains_wall(["--set", f"rod.edges={edges}"], f"gains-n{edges}-{i}") for i in range(repeats))
+
+
+def _robust_design_seconds() -> float:
+    """One robust refinement of the default file from an empty design cache (design_cache.py)."""
+    with tempfile.TemporaryDirectory(prefix="rodctl-bench-cache-") as cache:
+        return _gains_wall(["--set", "design.method=robust"], "gains-robust", {"RODGAINS_CACHE_DIR": cache})
+
+
+def _gains_wall(args: list[str], name: str, env: dict[str, str] | None = None) -> float:
+    """Wall time [s] of `rodctl gains ARGS --json` in a new interpreter, its JSON in a scratch folder."""
     with tempfile.TemporaryDirectory(prefix="rodctl-bench-") as tmp:
-        for i in range(repeats):
-            t0 = time.perf_counter()
-            r = subprocess.run([sys.executable, "-m", "rodctl.cli", "gains", "--set", f"rod.edges={edges}", "--json",
-                                str(Path(tmp) / f"gains-n{edges}-{i}.json")], capture_output=True, text=True)
-            walls.append(time.perf_counter() - t0)
-            if r.returncode != 0:
-                raise UserError(f"rodctl gains failed: {r.stderr.strip()}")
-    return statistics.median(walls)
+        t0 = time.perf_counter()
+        r = subprocess.run([sys.executable, "-m", "rodctl.cli", "gains", *args, "--json", str(Path(tmp) / f"{name}.json")],
+                           capture_output=True, text=True, env=None if env is None else {**os.environ, **env})
+        wall = time.perf_counter() - t0
+    if r.returncode != 0:
+        raise UserError(f"rodctl gains failed: {r.stderr.strip()}")
+    return wall
 
 
 def _sil_factor(edges: int, kind: str, seconds: float) -> float:
@@ -97,6 +109,7 @@ def measure(groups: set[str], quick: bool = False) -> dict:
         from rodctl.bench import robust as bench_robust
 
         out.update(bench_robust.measure(quick=quick))
+        out["robust_design_seconds"] = round(_robust_design_seconds(), 1)
     if "control" in groups:
         from rodctl.bench import control as bench_control
 
