@@ -3,11 +3,7 @@ not the user's ~/.cache/rodgains, so results and run time never depend on earlie
 this machine or on HOME. Set here, at import, so the rodctl subprocesses the tests start inherit it;
 the tests of the cache itself set their own folder (tests/test_design_cache.py).
 
-What runs is chosen on the command line only: --full-reference adds the tests marked full_reference.
-
-The order: the slowest test files first (SLOWEST_FIRST), the others as collected. .ci/run gives each file to
-one worker in that order (`--dist loadfile --no-loadscope-reorder`), so the longest file starts at once and
-the others fill the second worker around it, rather than a long file starting last and running alone."""
+What runs is chosen on the command line only: --full-reference adds the tests marked full_reference."""
 
 from __future__ import annotations
 
@@ -29,16 +25,8 @@ def pytest_configure(config):
                                        "runs only with --full-reference")
 
 
-# longest first, by each file's test time from a fresh clone (`pytest --durations=0`)
-SLOWEST_FIRST = ("test_identify.py", "test_robust_design.py", "test_check.py", "test_docs_site.py", "test_track.py",
-                 "test_host_log.py", "test_robustness_matrix.py", "test_bad_inputs.py")
-
-
 def pytest_collection_modifyitems(config, items):
-    """The slowest files first (a stable sort: each file's own order stays). A long test is chosen on the
-    command line, where the run shows it, never by the environment."""
-    rank = {name: i for i, name in enumerate(SLOWEST_FIRST)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+    """A long test is chosen on the command line, where the run shows it, never by the environment."""
     if config.getoption("--full-reference"):
         return
     skip = pytest.mark.skip(reason="minutes on the Python model: run with --full-reference")
