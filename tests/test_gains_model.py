@@ -158,3 +158,20 @@ def test_der_agrees_with_inextensible_rod_when_edges_barely_stretch():
     # the rod falls by tens of degrees in 0.3 s; the two models stay within 0.5 deg
     assert np.degrees(np.abs(r[:4] - th0).max()) > 10
     assert np.degrees(np.abs(th_der - r[:4]).max()) < 0.5
+
+
+def test_the_guards_batched_rods_follow_the_rod_model():
+    """The large-signal guard integrates its rods side by side (large_signal._Family, eq. 13 batched); each
+    rod's rates must be RodModel.f's, here for rods differing in base inertia and damping, far from upright."""
+    from rodgains.large_signal import _Family
+
+    p = load_params()
+    rods = [RodModel.from_params(q, design=True).kelvin_voigt() for q in
+            (p, p.with_overrides("motor.rotor_inertia=9e-07"), p.with_overrides("rod.damping=0.0002"))]
+    rng = np.random.default_rng(3)
+    q = np.pi + 0.6 * rng.standard_normal((3, 2 * rods[0].N))
+    tau = np.array([0.05, -0.2, 0.0])
+    got = _Family(rods).f(q, tau)
+    for i, rod in enumerate(rods):
+        want = rod.f(q[i], tau[i])
+        assert np.allclose(got[i], want, rtol=1e-10, atol=1e-10 * np.max(np.abs(want))), i
