@@ -107,8 +107,8 @@ bool board_imu_begin(void)
 void board_imu_take(rod_imu_reading_t *out)
 {
     out->fresh = false;
-    if (!done) {
-        return;
+    if (!alive || !done) {
+        return;  // a part given up at boot stays silent, even if its first transfer ends late
     }
     done = false;
     __atomic_signal_fence(__ATOMIC_SEQ_CST);  // rx (DMA-written, not volatile) is read after done, not before

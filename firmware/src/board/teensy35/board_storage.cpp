@@ -12,11 +12,11 @@ void board_storage_read(uint8_t *out, size_t n)
 
 bool board_storage_write(const uint8_t *data, size_t n)
 {
-    eeprom_write_block(data, (void *)BOARD_RIG_EEPROM_ADDR, (uint32_t)n);
     uint8_t back[32];
     if (n > sizeof back) {
-        return false;
+        return false;  // refused before anything is written: the record could not be read back
     }
+    eeprom_write_block(data, (void *)BOARD_RIG_EEPROM_ADDR, (uint32_t)n);
     board_storage_read(back, n);
     return memcmp(back, data, n) == 0;
 }

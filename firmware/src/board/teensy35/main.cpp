@@ -1,11 +1,15 @@
 // main.cpp -- the Teensy 3.5 board: pins, timer, USB. The firmware itself is rod_device (core).
 //
-// Control step: IntervalTimer interrupt every ROD_LOOP_PERIOD_US at a priority above USB; it
-// reads the encoder and nFAULT, runs rod_device_step, and drives DIR / PWM / nEN. USB: only in
-// loop(), never blocking: host bytes go to rod_device_rx (leftovers kept while the core's
+// Control step: IntervalTimer interrupt every ROD_LOOP_PERIOD_US at a priority above USB; it reads
+// the encoder and nFAULT, runs rod_device_step, and drives DIR / PWM / nEN. USB: only in loop(),
+// which does not wait on the host: host bytes go to rod_device_rx (leftovers kept while the core's
 // command ring is full); frames from rod_device_tx are written only as far as the current USB
-// packet has room (usb_serial_write_buffer_free() is the room in one 64-byte packet, not the
-// whole queue), and a frame that finds no room at all is dropped and counted.
+// packet has room (usb_serial_write_buffer_free() is the room in one 64-byte packet, not the whole
+// queue), and a frame that finds no room at all is dropped and counted. One wait remains: the USB
+// start-of-frame interrupt can take the packet between availableForWrite() and write()
+// (usb_serial.c's own TODO), and write() then waits up to TX_TIMEOUT_MSEC (70 ms) once. Control
+// runs on in its interrupt meanwhile, and 70 ms plus the 10 ms refresh period stays inside the
+// 100 ms watchdog.
 //
 // Teensyduino API checked in PaulStoffregen/cores teensy3/: IntervalTimer.h (priority(),
 // begin(f, unsigned us)), usb_serial.h (available, readBytes, availableForWrite, write),
@@ -98,7 +102,7 @@ static void control_step()
     last_step_us = (ARM_DWT_CYCCNT - start) / (F_CPU / 1000000u);
 }
 
-// ---- main loop: USB both ways, never blocking --------------------------------------------------
+// ---- main loop: USB both ways, not waiting on the host ----------------------------------------
 
 static uint8_t rx_buf[64];
 static size_t rx_len, rx_used;
