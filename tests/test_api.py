@@ -29,7 +29,7 @@ def test_design_exports_python_control_models():
     assert isinstance(ol, control.StateSpace) and ol.isctime() and ols.dt == cl.dt == d.dt
     assert ol.nstates == 2 * d.N and max(control.poles(ol).real) > 0  # upright is unstable
     rho = max(abs(control.poles(cl)))
-    assert rho == np.float64(rho) and abs(rho - d.checks["closed_loop_spectral_radius"]) < 1e-9
+    assert rho < 1.0 and abs(rho - d.checks["closed_loop_spectral_radius"]) < 1e-9  # stable, as the report says
     assert cl.output_labels == ["theta_1", "torque_Nm"]
     # a held disturbance torque is rejected: theta_1 settles, the command cancels it (the disturbance
     # estimate is slow by design, a loop mode near -0.46 rad/s: docs/scenarios.md, "Balance weights")
