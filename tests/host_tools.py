@@ -114,6 +114,25 @@ def start_rodctl(*args, env: dict | None = None, **kw) -> subprocess.Popen:
                             env=env or rodctl_env(), **kw)
 
 
+class BoardSaid:
+    """What a `rodctl sim-device` process has said on its stderr so far (its mode changes, "A -> B"),
+    read without blocking: call it for the text."""
+
+    def __init__(self, proc: subprocess.Popen):
+        self._fd = proc.stderr.fileno()
+        self._said = bytearray()
+
+    def __call__(self) -> str:
+        import select
+
+        while select.select([self._fd], [], [], 0)[0]:
+            chunk = os.read(self._fd, 65536)
+            if not chunk:
+                break
+            self._said.extend(chunk)
+        return self._said.decode(errors="replace")
+
+
 @contextmanager
 def sim_device(*args, startup_timeout: float = 60):
     """`rodctl sim-device --pty ARGS` in another process; yields (Popen, /dev/pts path)."""

@@ -7,13 +7,12 @@ import json
 import os
 import pty
 import re
-import select
 import signal
 import time
 
 import pytest
 
-from host_tools import run_rodctl, sim_device, start_rodctl, until
+from host_tools import BoardSaid, run_rodctl, sim_device, start_rodctl, until
 
 ENCODER_SIGN_FIX = ("Fix: the encoder counts backwards: flip the board's encoder sign (`rodctl check --fix` stores "
                     "it), or swap the encoder's A and B wires")
@@ -187,17 +186,7 @@ def test_ctrl_c_during_the_pulses_leaves_the_board_disarmed():
             seen += line
         assert "motor:" in seen, seen
         # the virtual board reports its mode changes on stderr; its first IDENTIFY is the pulses
-        said = bytearray()
-
-        def board_said() -> str:
-            fd = dev.stderr.fileno()
-            while select.select([fd], [], [], 0)[0]:
-                chunk = os.read(fd, 65536)
-                if not chunk:
-                    break
-                said.extend(chunk)
-            return said.decode(errors="replace")
-
+        board_said = BoardSaid(dev)
         assert until(lambda: "-> IDENTIFY" in board_said(), timeout=60), board_said()
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=30)

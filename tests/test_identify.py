@@ -434,9 +434,9 @@ def test_rig_a_meets_the_nominal_goals_with_the_chosen_compensation(tmp_path):
         assert r["passed"] and r["settle_s"] < goal, r
 
 
-def _identify_interrupted(tmp_path, second: str, settle: str, until: str, delay_s: float = 0.0,
+def _identify_interrupted(tmp_path, second: str, settle: str, until: str,
                           playing: tuple[str, int] | None = None):
-    """Run `identify` on sim:// (release, then `second`) and send Ctrl-C `delay_s` after a stderr line starts
+    """Run `identify` on sim:// (release, then `second`) and send Ctrl-C once a stderr line starts
     with `until` (with playing = (experiment, rows): once that experiment's log holds `rows` rows in IDENTIFY
     instead, a point of the experiment on the board's clock); returns (its stderr after that line, the log
     folder). Exit 130 is asserted."""
@@ -453,9 +453,7 @@ def _identify_interrupted(tmp_path, second: str, settle: str, until: str, delay_
             seen.append(line)
             if line.startswith(until):
                 break
-        if playing is None:
-            time.sleep(delay_s)
-        else:
+        if playing is not None:
             name, rows = playing
             while _identify_rows(logs, name) < rows and proc.poll() is None:
                 time.sleep(0.02)
@@ -501,9 +499,31 @@ def test_ctrl_c_between_experiments_says_how_to_fit_the_logs_it_kept(tmp_path):
 
 
 def test_ctrl_c_during_the_settle_move_stops_the_motor(tmp_path):
-    err, logs = _identify_interrupted(tmp_path, "prbs", "1", "  before it, settle", delay_s=2.0)
-    last = err.strip().splitlines()[-1]
-    assert last.startswith("rodctl: interrupted; the motor is off; 1 experiment log kept: fit it with"), last
+    """On a virtual board in another process: the Ctrl-C lands while the board plays the settle move (its
+    second IDENTIFY, after the release's), and the board ends disarmed by the host."""
+    import json
+    import signal
+
+    from host_tools import BoardSaid, sim_device, start_rodctl, until
+
+    logs = tmp_path / "logs"
+    with sim_device() as (dev, port):
+        board_said = BoardSaid(dev)
+        proc = start_rodctl("identify", "--port", port, "--experiment", "release", "--experiment", "prbs", "--yes",
+                            "--settle", "1", "--log-dir", str(logs), "--out", str(tmp_path / "o.toml"))
+        try:
+            assert until(lambda: board_said().count("-> IDENTIFY") >= 2, timeout=180), board_said()
+            proc.send_signal(signal.SIGINT)
+            _, err = proc.communicate(timeout=60)
+        finally:
+            proc.kill()
+        assert proc.returncode == 130, err
+        assert "  before it, settle" in err  # what was playing: the settle move
+        last = err.strip().splitlines()[-1]
+        assert last.startswith("rodctl: interrupted; the motor is off; 1 experiment log kept: fit it with"), last
+        status = json.loads(run_rodctl("status", "--port", port, "--json", timeout=60).stdout)
+        assert (status["mode"], status["reason"]) == ("DISARMED", "HOST")
+        assert until(lambda: board_said().count("IDENTIFY -> DISARMED") >= 2, timeout=30), board_said()
     assert [f.name.split("-", 3)[3] for f in logs.glob("identify-*.csv") if not f.name.endswith(".events.csv")] == \
         ["release.csv"], "the settle move is not logged"
 
