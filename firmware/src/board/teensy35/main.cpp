@@ -262,7 +262,7 @@ void setup()
     // May block for up to about 2 s on some Teensyduino cores (1.62 waits for a host to open the
     // port; other versions return at once). Nothing depends on it: the driver is already off
     // (nEN high above), the control timer and watchdog start after it, and every USB call in
-    // loop() is non-blocking and copes with no host (frames are dropped and counted).
+    // loop() copes with no host without waiting for one (frames are dropped and counted).
     Serial.begin(115200);  // USB: the baud rate is ignored
     rod_device_init(&device);
     {
