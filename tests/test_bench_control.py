@@ -33,6 +33,8 @@ def test_control_goals_are_reported_with_verdicts_and_a_miss_exits_1(monkeypatch
         r = fake(params, case, task, **kw)
         if plant_params is not None and plant_params["encoder"]["zero_error_deg"] == 0.0 and task == "swingup":
             r["final_dev_deg"] = 8.3  # the zero on a count's edge: the worst place decides
+        if kw.get("extra_plant_overrides") == ("driver.supply_voltage=10.0",):
+            r["caught_at_s"] = 3.22  # the stall watch's catch on the low supply
         return r
 
     monkeypatch.setattr(M, "run_case", run_case)
@@ -50,7 +52,7 @@ def test_control_goals_are_reported_with_verdicts_and_a_miss_exits_1(monkeypatch
     assert main(["bench", "--only", "control", "--json", str(out)]) == 1  # goals missed
     got = json.loads(out.read_text())
     assert got == {"nominal_balance_settle_s": 0.7, "nominal_balance_final_deg": 0.8, "nominal_swingup_catch_s": 0.93,
-                   "nominal_swingup_settle_s": 1.55, "nominal_swingup_final_deg": 0.8, "balanced_torque_rms_mNm": 25.0,
+                   "low_supply_swingup_catch_s": 3.22, "nominal_swingup_settle_s": 1.55, "nominal_swingup_final_deg": 0.8, "balanced_torque_rms_mNm": 25.0,
                    "matrix_runs_passing": 70, "matrix_runs": 72, "backlash3_final_deg": 4.2,
                    "zero_place_worst_final_deg": 8.3, "longest_rod_ratio": 1.1,
                    "longest_rod_ratio_imu": 1.0, "longest_rod_ratio_imu_no_play": 1.3,
@@ -79,7 +81,9 @@ def test_control_quick_skips_the_matrix_and_the_longest_rod(monkeypatch):
     monkeypatch.setattr(M, "run_case", never)
     got = control.measure(quick=True)
     assert set(got) == {"nominal_balance_settle_s", "nominal_balance_final_deg", "nominal_swingup_catch_s",
-                        "nominal_swingup_settle_s", "nominal_swingup_final_deg", "balanced_torque_rms_mNm"}
+                        "nominal_swingup_settle_s", "nominal_swingup_final_deg", "balanced_torque_rms_mNm",
+                        "low_supply_swingup_catch_s"}
+    assert got["low_supply_swingup_catch_s"] == float("inf")  # never caught reads as a miss
     assert got["nominal_balance_settle_s"] == float("inf")  # never settled reads as a miss, not a crash
 
 

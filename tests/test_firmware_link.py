@@ -26,7 +26,7 @@ def test_hello_at_start_up_describes_firmware_and_settings():
     h = hellos[0].msg
     p = dev.p
     assert (h.fw_major, h.fw_minor, h.fw_patch) == version_from_header()
-    assert h.gains_schema == 4
+    assert h.gains_schema == 5
     assert h.n == p.N
     assert h.mode == P.Mode.DISARMED
     assert h.period_us == round(p.dt * 1e6)

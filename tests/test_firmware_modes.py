@@ -4,6 +4,8 @@ import math
 
 import pytest
 
+from rodgains.codegen import pendulum_frequency
+
 from firmware_sil import ACK, MODE, RAD_PER_COUNT, REASON, UPRIGHT, Sil, count_of
 
 
@@ -58,6 +60,40 @@ def test_swing_up_pumps_with_the_sign_of_the_rate_inside_the_swing_angle(sil):
     for k in range(30):
         u = sil.step(-10 + k)
     assert u == pytest.approx(amplitude, rel=1e-6)
+
+
+def imposed_swing(sil, peaks_deg):
+    """Half-swings from bottom to bottom at the rigid pendulum's frequency, peaking at peaks_deg in turn on
+    alternate sides (a motion no torque made: past the runaway watch); the pump's largest |torque| in each [N m]."""
+    omega0 = pendulum_frequency(sil.p)
+    steps = int(round(math.pi / omega0 / sil.p.dt))
+    sil.arm(2)
+    sil.past_runaway_watch(0)
+    pumps = []
+    for k, peak in enumerate(peaks_deg):
+        side = 1 if k % 2 == 0 else -1
+        pumps.append(max(abs(sil.step(count_of(side * math.radians(peak) * math.sin(math.pi * i / steps))))
+                         for i in range(steps)))
+    assert sil.mode == MODE["SWING_UP"]
+    return pumps
+
+
+def test_a_stalled_swing_raises_the_pump_to_twice_its_amplitude(sil):
+    """A swing that turns back at the same angle half-swing after half-swing is a stall (rod_swingup.h): the
+    pump rises a quarter at each, to 2 x, and a rod that still rises 20 deg a half-swing is left alone."""
+    amplitude = sil.p["swing_up"]["amplitude"]
+    stalled = imposed_swing(sil, [100.0] * 7)
+    # the first two set the level; each later one is a stall
+    assert [round(u / amplitude, 4) for u in stalled] == [1.0, 1.0, 1.25, 1.5625, 1.9531, 2.0, 2.0]
+    sil.lib.rod_sil_reset()
+    rising = imposed_swing(sil, [20.0, 40.0, 60.0, 80.0, 100.0])
+    assert rising == pytest.approx([amplitude] * 5, rel=1e-6)
+
+
+def test_the_stall_watch_can_be_turned_off():
+    sil = Sil(("swing_up.stall_steps=0",))
+    amplitude = sil.p["swing_up"]["amplitude"]
+    assert imposed_swing(sil, [100.0] * 5) == pytest.approx([amplitude] * 5, rel=1e-6)
 
 
 def test_no_swing_torque_outside_the_swing_angle():

@@ -210,7 +210,7 @@ def test_header_literals_are_all_float():
 
 SMOKE_C = r"""
 #include "rod_gains.h"
-#if ROD_GAINS_SCHEMA_VERSION != 4
+#if ROD_GAINS_SCHEMA_VERSION != 5
 #error "schema"
 #endif
 const float Ad[ROD_NX][ROD_NX] = ROD_AD_INIT;

@@ -16,7 +16,7 @@ from .design import Design, lean_torque
 from .trim import trim_gains
 
 # Bump when the macro set or its meaning changes; firmware/src/core/rod_config.h checks it.
-HEADER_SCHEMA_VERSION = 4
+HEADER_SCHEMA_VERSION = 5
 DEFAULT_HEADER = Path("firmware/include/rod_gains.h")
 
 
@@ -136,6 +136,7 @@ def header_text(d: Design, command: str) -> str:
         ("ROD_SWING_ENERGY_TARGET", f32(2.0 * swing["energy_target"]), "pump toward this energy (2 = upright) [-]"),
         ("ROD_SWING_RATE_LP_K", f32(1.0 - math.exp(-2 * math.pi * swing["rate_filter_hz"] * d.dt)),
          f"swing-up rate low-pass, {swing['rate_filter_hz']:g} Hz, per period [-]"),
+        ("ROD_SWING_STALL_STEPS", str(swing['stall_steps']), "stalled half-swings that raise the pump, at most [-]"),
         ("ROD_CATCH_ANGLE_RAD", f32(deg(swing["catch_angle_deg"])), "switch to balance within this of upright [rad]"),
         ("ROD_ANGLE_LIMIT_RAD", f32(deg(safety["angle_limit_deg"])), "balance disarms beyond this from upright [rad]"),
         ("ROD_SPEED_LIMIT_RAD_S", f32(safety["speed_limit"]), "disarm beyond this base speed [rad/s]"),

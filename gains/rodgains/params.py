@@ -214,6 +214,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "catch_angle_deg": Key(float, "deg", _above_upto(0, 90)),
         "energy_target": Key(float, "-", _between(0.5, 2.0)),
         "rate_filter_hz": Key(float, "Hz", _positive),
+        "stall_steps": Key(int, "-", _between(0, 20), default=5),
     },
     "safety": {
         "torque_limit": Key(float, "N m", _positive),

@@ -13,12 +13,12 @@
 /* ---- the header's layout ---------------------------------------------------------------- */
 
 /* The macro set this firmware was written against (gains/codegen.py HEADER_SCHEMA_VERSION). */
-#define ROD_GAINS_SCHEMA_EXPECTED 4
+#define ROD_GAINS_SCHEMA_EXPECTED 5
 
 #ifndef ROD_GAINS_SCHEMA_VERSION
 #error "rod_gains.h has no ROD_GAINS_SCHEMA_VERSION: regenerate it with `rodctl gains`"
 #elif ROD_GAINS_SCHEMA_VERSION != ROD_GAINS_SCHEMA_EXPECTED
-#error "rod_gains.h has a different ROD_GAINS_SCHEMA_VERSION than this firmware expects (4): regenerate it with the rodctl of this checkout (`rodctl gains`)"
+#error "rod_gains.h has a different ROD_GAINS_SCHEMA_VERSION than this firmware expects (5): regenerate it with the rodctl of this checkout (`rodctl gains`)"
 #endif
 
 #if !defined(ROD_N) || !defined(ROD_NX) || !defined(ROD_LOOP_PERIOD_US) || !defined(ROD_DT_S) \
@@ -27,7 +27,7 @@
     || !defined(ROD_MOTOR_KT_NM_PER_A) || !defined(ROD_MOTOR_KE_V_S_PER_RAD) || !defined(ROD_MOTOR_R_OHM) \
     || !defined(ROD_SUPPLY_V) || !defined(ROD_TORQUE_MAX_NM) || !defined(ROD_DUTY_MAX) \
     || !defined(ROD_PWM_FREQUENCY_HZ) || !defined(ROD_COULOMB_COMP_NM) || !defined(ROD_SWING_AMPLITUDE_NM) || !defined(ROD_SWING_ANGLE_RAD) \
-    || !defined(ROD_SWING_OMEGA0_RAD_S) || !defined(ROD_SWING_ENERGY_TARGET) || !defined(ROD_SWING_RATE_LP_K) \
+    || !defined(ROD_SWING_OMEGA0_RAD_S) || !defined(ROD_SWING_ENERGY_TARGET) || !defined(ROD_SWING_RATE_LP_K) || !defined(ROD_SWING_STALL_STEPS) \
     || !defined(ROD_CATCH_ANGLE_RAD) || !defined(ROD_ANGLE_LIMIT_RAD) || !defined(ROD_SPEED_LIMIT_RAD_S) \
     || !defined(ROD_HEARTBEAT_TIMEOUT_S) || !defined(ROD_GAINS_SHA256_BYTES_INIT) \
     || !defined(ROD_AD_INIT) || !defined(ROD_BD_INIT) || !defined(ROD_K_INIT) || !defined(ROD_L_INIT) \
@@ -90,6 +90,16 @@
  * the target (2 = upright at rest), and brakes likewise above it [-]. Narrow: the pump stays
  * bang-bang (eq. 22) until the rod is nearly there. */
 #define ROD_SWING_ENERGY_BAND 0.1f
+
+/* The swing-up's stall watch (rod_swingup.h): a half-swing rising no more than this is a stall
+ * [rad] (5 deg: Table I's rod, pumped at 50 mN m, rises 20 to 60 deg a half-swing until it is
+ * caught); each stall adds the step to the energy target (2 = upright) [-] and multiplies the
+ * pump by the gain [-], up to the gain's ceiling [-]. Stalls allowed: ROD_SWING_STALL_STEPS
+ * (rod_gains.h, swing_up.stall_steps). */
+#define ROD_SWING_STALL_RISE_RAD 0.0872665f
+#define ROD_SWING_STALL_TARGET_STEP 0.1f
+#define ROD_SWING_STALL_GAIN 1.25f
+#define ROD_SWING_STALL_GAIN_MAX 2.0f
 
 /* Friction compensation ramps over this base rate [rad/s]: about the rate one count per
  * 0.1 s gives, so it follows the motion without flipping on quantization noise. */

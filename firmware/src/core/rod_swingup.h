@@ -9,6 +9,13 @@
  * sign(dtheta_1), but at every angle up to the swing angle; at the target it stops pushing, and
  * above it brakes, so the rod arrives near upright slowly instead of flying over the top.
  * omega0 (the rigid rod + motor pendulum frequency) and the target come from rod_gains.h.
+ *
+ * The stall watch. Where the pump cannot lift the rod into the catch window (a supply below the
+ * design's, a weaker motor, a rod whose bend fools the rigid energy) the swing settles into a steady
+ * amplitude short of it and is never caught. A half-swing (bottom to bottom) that turns back no more
+ * than ROD_SWING_STALL_RISE_RAD higher than the one before is a stall: each raises the target by
+ * ROD_SWING_STALL_TARGET_STEP and the amplitude by ROD_SWING_STALL_GAIN (to ROD_SWING_STALL_GAIN_MAX x),
+ * at most ROD_SWING_STALL_STEPS times (0: off). A rod still rising faster is left alone.
  */
 #ifndef ROD_SWINGUP_H
 #define ROD_SWINGUP_H
@@ -18,7 +25,13 @@ extern "C" {
 #endif
 
 typedef struct {
-    float rate_lp; /* base rate through a first-order low-pass [rad/s] */
+    float rate_lp;    /* base rate through a first-order low-pass [rad/s] */
+    float peak;       /* largest |from_bottom| of this half-swing [rad] */
+    float last_peak;  /* the last half-swing's [rad]; < 0 before the first */
+    float side;       /* sign of from_bottom on this half-swing: -1, 0 (at rest), +1 */
+    float target;     /* the energy target, raised by stalls (2 = upright) [-] */
+    float gain;       /* the amplitude's factor, raised by stalls [-] */
+    int stalls;       /* stalls seen since the swing-up began */
 } rod_swingup_t;
 
 void rod_swingup_init(rod_swingup_t *s);

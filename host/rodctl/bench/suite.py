@@ -39,6 +39,8 @@ GOALS = {
     "nominal_balance_settle_s": (1.5, "<=", "s", "faithful plant (1 deg of play), from 30 deg, every link within 1 deg"),
     "nominal_balance_final_deg": (1.0, "<=", "deg", "its largest link deviation over the last 0.5 s"),
     "nominal_swingup_catch_s": (5.0, "<=", "s", "faithful plant, swing-up from rest to the catch"),
+    "low_supply_swingup_catch_s": (5.0, "<=", "s", "the same on a 10 V supply, the firmware made for 12 V: the stall "
+                                   "watch lifts the swing past the steady 147 deg it stalls at (docs/control.md)"),
     "nominal_swingup_settle_s": (2.0, "<=", "s", "faithful plant, every link within 1 deg after the catch"),
     "nominal_swingup_final_deg": (1.0, "<=", "deg", "its largest link deviation over the last 0.5 s"),
     "balanced_torque_rms_mNm": (20.0, "<=", "mN m", "RMS torque over the last 4 s of the nominal swing-up (docs/control.md)"),

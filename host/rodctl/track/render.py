@@ -243,20 +243,21 @@ def simulate_filmed_run(params, path, *, swing_deg: float = 50.0, free_s: float 
 
 
 TEST_SWING_AMPLITUDE = 0.012  # [N m]: a slow swing-up, so the base swings through the whole clip
+DEMO_SWING = (f"swing_up.amplitude={TEST_SWING_AMPLITUDE}", "swing_up.stall_steps=0")  # its plateau kept
 
 
 def demo(folder, fps: float = 120.0, seconds: float = 8.0, *, scene: RodScene | None = None,
          filming: Filming | None = None, params=None) -> dict:
     """A filmed simulated run in `folder`: run.csv (+ .truth.csv), run.mp4 and board.png (a checkerboard
-    9x6, 20 mm, in the rod's plane). The swing-up is slowed (swing_up.amplitude TEST_SWING_AMPLITUDE) so
-    the rod swings through the whole clip; the camera adds tilt, distortion, noise, blur, two repeated
+    9x6, 20 mm, in the rod's plane). The swing-up is slowed (swing_up.amplitude TEST_SWING_AMPLITUDE) and
+    its stall watch is off (it would raise the pump at the plateau) so the rod swings through the whole clip; the camera adds tilt, distortion, noise, blur, two repeated
     frames and a hand over marker 3. Returns the paths and the filming."""
     import cv2
     from rodgains.params import load_params
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    p = (params or load_params()).with_overrides(f"swing_up.amplitude={TEST_SWING_AMPLITUDE}")
+    p = (params or load_params()).with_overrides(*DEMO_SWING)
     log = folder / "run.csv"
     t, th, lengths = simulate_filmed_run(p, log, swing_deg=0.0, free_s=0.2, armed_s=seconds + 1.0, after_s=0.0)
     scene = scene or RodScene(width=480, height=360, px_per_m=900.0, tilt=0.03, distortion=0.03)
