@@ -493,6 +493,18 @@ def test_more_bad_input_is_exit_2(tmp_path, argv, line):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_study_folder_whose_journal_is_a_folder_is_refused_before_any_trial(tmp_path, capsys):
+    from rodctl.cli import main
+
+    study = tmp_path / "st"
+    (study / "journal.log").mkdir(parents=True)
+    assert main(["tune", "--cases", "nominal", "--samples", "0", "--budget", "1", "--study", str(study),
+                 "--out", str(tmp_path / "t.toml")]) == 2
+    assert capsys.readouterr().err == (f"rodctl: --study {study}: journal.log is not a file; use a new --study "
+                                       "folder\n")
+    assert sorted(p.name for p in study.iterdir()) == ["journal.log"] and not (tmp_path / "t.toml").exists()
+
+
 def test_a_killed_tune_s_cut_journal_line_is_named_and_left_as_it_was(tmp_path, capsys):
     """A tune killed mid-write leaves its journal's last line cut short: resuming names the file and line,
     exit 2, and appends nothing to it (Optuna would have written first and then failed to read it)."""
@@ -592,6 +604,27 @@ def test_a_folder_beside_the_header_is_refused_before_the_header_is_written(tmp_
     assert r.returncode == 2
     assert _one_line(r) == f"rodctl: --header {tmp_path / 'rod_gains.toml'}: is a folder"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rod_gains.toml"]
+
+
+def test_a_header_named_like_its_parameter_record_is_refused(tmp_path):
+    """The record goes beside the header with .toml: --header x.toml --force would write the record over the
+    header it was asked for."""
+    mine = tmp_path / "mine.toml"
+    mine.write_text("[rod]\n")
+    r = run_rodctl("gains", "--header", str(mine), "--force")
+    assert r.returncode == 2
+    assert _one_line(r) == (f"rodctl: --header {mine}: the header's parameter record is written beside it as {mine}; "
+                            "name the header *.h")
+    assert mine.read_text() == "[rod]\n" and sorted(p.name for p in tmp_path.iterdir()) == ["mine.toml"]
+
+
+def test_check_of_a_header_that_is_not_text_says_it_is_stale(tmp_path):
+    png = tmp_path / "h.png"
+    png.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(range(256)))
+    r = run_rodctl("gains", "--header", str(png), "--check")
+    assert r.returncode == 1 and "Traceback" not in r.stderr
+    assert _one_line(r).startswith(f"rodctl gains --check: {png}, {png.with_suffix('.toml')} not what the parameters "
+                                   "generate; regenerate with: ")
 
 
 # An empty name (an unset shell variable) is refused with the option's name, never taken for the default name,
@@ -704,6 +737,17 @@ def test_a_sim_eeprom_that_cannot_be_a_file_is_bad_input_not_a_board_that_stoppe
     assert r.returncode == 2, r.stderr
     assert _one_line(r) == "rodctl: sim://: " + says.format(tmp=tmp_path)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_sim_eeprom_file_that_is_someone_elses_is_not_written_over(tmp_path):
+    """`set --save` on sim://?eeprom=notes.txt would replace the notes with the board's 16-byte rig record."""
+    notes = tmp_path / "notes.txt"
+    notes.write_text("my measurements\n")
+    r = run_rodctl("set", "--save", "encoder_sign=-1", "--port", f"sim://?eeprom={notes}")
+    assert r.returncode == 2, r.stderr
+    assert _one_line(r) == (f"rodctl: sim://: eeprom={notes}: not an EEPROM image (the board's rig record starts "
+                            "with 'RG'); name a new file")
+    assert notes.read_text() == "my measurements\n" and [p.name for p in tmp_path.iterdir()] == ["notes.txt"]
 
 
 @pytest.mark.parametrize("hub", ["inf,1", "nan,nan"])

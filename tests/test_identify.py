@@ -7,6 +7,7 @@ import dataclasses
 import math
 import time
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -555,6 +556,26 @@ def test_fitting_logs_skips_the_runs_that_did_not_play_to_their_end(tmp_path):
     assert err[1] == f"fit: skipping {cut}: the experiment did not play to its end (interrupted: Ctrl-C or a lost link)"
     assert err[-1] == "rodctl: no experiment log played to its end (2 skipped): nothing to fit"
     assert not (tmp_path / "o.toml").exists()
+
+
+def test_fitting_logs_says_which_is_cut_short_and_fits_a_log_given_twice_once(tmp_path):
+    """A log copied while it grew (its last row cut in half) is fitted for what it holds, and says so; the same
+    file named twice (a glob and a name) is one experiment, not two records."""
+    import shutil
+
+    whole = _identify_log(tmp_path / "identify-1-steps.csv", "done")
+    cut = tmp_path / "identify-2-steps.csv"
+    for suffix in ("", ".json", ".events.csv"):
+        if Path(f"{whole}{suffix}").exists():
+            shutil.copy(f"{whole}{suffix}", f"{cut}{suffix}")
+    data = cut.read_bytes()
+    cut.write_bytes(data[: len(data) // 2 + 7])
+    r = run_rodctl("identify", str(cut), str(whole), str(whole), "--out", str(tmp_path / "o.toml"))
+    err = r.stderr.strip().splitlines()
+    assert err[0].startswith(f"fit: warning: {cut}: cut short (1 cut row skipped); ") and \
+        err[0].endswith(" telemetry frames readable; fitting the readable part"), err
+    assert err[1] == f"fit: skipping {whole}: the same log as {whole.name}", err
+    assert not any("skipping" in line for line in err[2:]), err
 
 
 def test_ctrl_c_mid_experiment_disarms_and_counts_only_the_complete_runs(tmp_path):

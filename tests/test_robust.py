@@ -433,6 +433,19 @@ def test_bad_outputs_and_counts_fail_before_any_run(argv, words, tmp_path, capsy
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("command", [["robustness"], ["sweep", "--grid", "rod.edges=5", "--out", "{tmp}/s.parquet"],
+                                     ["tune", "--out", "{tmp}/t.toml"]])
+def test_more_local_workers_than_four_a_core_are_refused(command, monkeypatch, tmp_path, capsys):
+    """--jobs 100000 would start a Python process per queued run on a 2-core machine."""
+    from rodctl.robust import execute
+
+    monkeypatch.setattr(execute, "default_jobs", lambda: 2)
+    assert main([a.replace("{tmp}", str(tmp_path)) for a in command] + ["--jobs", "9"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "rodctl: --jobs 9: at most 8 local worker processes on these 2 cores; --scheduler ADDRESS runs on a Dask cluster"
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_plant_option_judges_the_design_on_another_rod(tmp_path, capsys):
     """--plant FILE: the design stays the default's, the rod (physics and [plant] table) is FILE's."""
     far = tmp_path / "far.toml"  # a rotor 5x heavier on a 10-edge N-link rod: the default design drops it

@@ -5,6 +5,7 @@ for what it writes; and the bad inputs."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -157,7 +158,8 @@ def test_a_video_without_the_markers_is_refused(filmed, tmp_path):
 
 @pytest.mark.parametrize("args, message", [
     (["missing.mp4", "--log", "LOG"], "video missing.mp4: no such file"),
-    (["VIDEO", "--log", "LOG", "--color", "0,0,0-200,255,255"], "H must be 0 <= low <= high <= 179"),
+    (["VIDEO", "--log", "LOG", "--color", "0,0,0-200,255,255"], "H must be within 0..179 (low > high wraps through red)"),
+    (["VIDEO", "--log", "LOG", "--color", "170,200,0-10,90,255"], "S must be 0 <= low <= high <= 255"),
     (["VIDEO", "--log", "LOG", "--scale", "-1"], "--scale -1: metres per pixel"),
     (["VIDEO", "--log", "LOG", "--out", "x.csv"], "the tracked log is Parquet"),
     (["VIDEO", "--log", "LOG", "--markers", "1"], "--markers 1: between 2 and 64"),
@@ -179,6 +181,73 @@ def test_bad_input_is_one_line_and_exit_2(filmed, tmp_path, args, message):
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert message in r.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_log_that_covers_part_of_the_video_is_said_so(filmed, tmp_path):
+    """The log copied while the run went on (it ends 70 % of the way through the video): the frames it covers
+    are compared, and a warning says how few and over how long the drift was measured."""
+    d = filmed[120]
+    lines = d["log"].read_text().splitlines(keepends=True)
+    t = np.array([float(line.split(",", 1)[0]) for line in lines[1:]])
+    keep = 1 + int(np.searchsorted(t, 0.6 + 0.7 * SECONDS[120]))
+    cut = tmp_path / "cut.csv"
+    cut.write_text("".join(lines[:keep]))
+    for suffix in (".json", ".events.csv"):
+        side = Path(f"{d['log']}{suffix}")
+        if side.exists():
+            Path(f"{cut}{suffix}").write_bytes(side.read_bytes())
+    r = run_rodctl("track", str(d["video"]), "--log", str(cut), "--out", str(tmp_path / "t.parquet"), "--quiet",
+                   timeout=300)
+    assert r.returncode == 0, r.stderr
+    warning = [ln for ln in r.stderr.splitlines() if "warning: the log covers" in ln]
+    assert len(warning) == 1 and "only those are compared" in warning[0], r.stderr
+    share = float(warning[0].split("covers ")[1].split(" %")[0])
+    assert 65 <= share <= 72, warning  # 70 % of the clip, less the frames too few markers left unusable
+    full = run_rodctl("track", str(d["video"]), "--log", str(d["log"]), "--out", str(tmp_path / "f.parquet"),
+                      "--quiet", timeout=300)
+    assert full.returncode == 0 and "warning: the log covers" not in full.stderr, full.stderr
+
+
+def test_red_markers_are_tracked_with_a_hue_range_that_wraps(filmed, tmp_path):
+    """The clip's pink markers turned red, half of each dot's pixels on either side of hue 0 (as a red sticker
+    under warm light): a range that wraps through red finds the rod as the pink one did; the default pink
+    range finds nothing."""
+    from rodgains.errors import InputError
+
+    from rodctl.track import track
+    from rodctl.track.markers import ColorRange
+
+    d = filmed[120]
+
+    def redden(k, frame):
+        hsv = cv2.cvtColor(frame, cv2.COLOR_BGR2HSV)
+        pink = cv2.inRange(hsv, np.array([145, 90, 90], np.uint8), np.array([179, 255, 255], np.uint8)) > 0
+        h = hsv[..., 0].astype(int)
+        hsv[..., 0] = np.where(pink, np.where((np.arange(h.shape[1]) % 2)[None, :] == 0, 176, 3), h).astype(np.uint8)
+        return cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR)
+
+    video = rewrite(d["video"], tmp_path / "red.mp4", change=redden)
+    red = track(video, d["log"], None, color=ColorRange.parse("165,90,90-12,255,255"), say=None)
+    pink = track(d["video"], d["log"], None, say=None)
+    # measured: 688 frames with every marker seen in both
+    assert red.counts()["good"] >= 0.98 * pink.counts()["good"], (red.counts(), pink.counts())
+    assert red.alignment.offset_s == pytest.approx(pink.alignment.offset_s, abs=1 / 120)
+    for one_side in (None, "0,90,90-12,255,255"):  # each half of a dot alone is no marker
+        with pytest.raises(InputError):
+            track(video, d["log"], None, color=ColorRange.parse(one_side), say=None)
+
+
+def test_a_calibration_image_too_small_for_a_board_is_said_so(tmp_path):
+    """An 8 x 8 px picture: OpenCV's adaptive threshold refuses it with an assertion; the user hears that no
+    board is in it, exit 2."""
+    from rodgains.errors import InputError
+
+    from rodctl.track.calibrate import View
+
+    tiny = tmp_path / "tiny.png"
+    cv2.imwrite(str(tiny), np.full((8, 8, 3), 200, np.uint8))
+    with pytest.raises(InputError, match=r"^--calibrate .*tiny.png: no 9x6 checkerboard \(inner corners\) found$"):
+        View.from_checkerboard(tiny, (9, 6), 0.02)
 
 
 @pytest.mark.parametrize("existing", ["t.parquet", "t.mcap", "t.png"])

@@ -32,8 +32,9 @@ def atomic_write(path: str | Path, data: str | bytes) -> Path:
 
 
 def stale(files: dict[Path, str]) -> list[Path]:
-    """Of generated files ({path: text}), those missing or not holding their text."""
-    return [f for f, text in files.items() if not f.is_file() or f.read_text() != text]
+    """Of generated files ({path: text}), those missing or not holding their text (as UTF-8: a file that is not
+    text is stale, not an error)."""
+    return [f for f, text in files.items() if not f.is_file() or f.read_bytes() != text.encode()]
 
 
 def write_changed(files: dict[Path, str]) -> list[Path]:

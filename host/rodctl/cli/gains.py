@@ -75,6 +75,9 @@ def run_gains(args) -> int:
         check_not_input(args.json, "--json", (args.params,))
     if args.header is not None:
         check_name(args.header, "--header")
+        if Path(args.header).suffix == ".toml":  # the parameter record beside the header would be the header itself
+            raise InputError(f"--header {args.header}: the header's parameter record is written beside it as "
+                             f"{Path(args.header).with_suffix('.toml')}; name the header *.h")
     elif not (args.report or args.json or args.check):
         paths.require_checkout("writing the committed header (or pass --header PATH)")
     if (args.header or not (args.report or args.json)) and not args.check:  # the header will be written

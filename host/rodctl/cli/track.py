@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 from rodgains.atomic_file import replacing
 from rodgains.errors import InputError
 
 from rodctl.cli.outputs import check_output
+
+COVERED_WARN = 0.95  # a log covering less of the video's usable frames than this is said to [-]
 
 
 def _pair(text: str | None, what: str) -> tuple[float, float] | None:
@@ -127,6 +130,10 @@ def run_track_command(args) -> int:
     print(f"alignment: the video's first frame at {a.offset_s:.4f} s of the log, clock drift {a.drift_ppm:+.0f} ppm, "
           f"base angle correlation {a.correlation:.4f}, residual {np.degrees(a.residual_rad):.2f} deg, "
           f"camera minus encoder {np.degrees(a.angle_offset_rad):+.2f} deg")
+    if a.covered < COVERED_WARN:
+        print(f"rodctl: warning: the log covers {100 * a.covered:.0f} % of the video's usable frames ({a.covered_s:.1f} s): "
+              "only those are compared, and the clock drift is measured over them (a log cut short, or filming "
+              "started before logging?)", file=sys.stderr)
     print("estimate minus video, per edge:")
     for line in table_lines(r.errors):
         print("  " + line)
@@ -174,7 +181,8 @@ def register(sub) -> None:
     p.add_argument("--markers", type=int, metavar="N", help="markers on the rod besides the axis's, equally spaced, "
                                                             "the last at the tip (default: the design's N)")
     p.add_argument("--color", metavar="H1,S1,V1-H2,S2,V2",
-                   help="the markers' HSV range in OpenCV units (H 0..179; default pink 145,90,90-179,255,255)")
+                   help="the markers' HSV range in OpenCV units (H 0..179, H1 > H2 wraps through red; default pink "
+                        "145,90,90-179,255,255)")
     p.add_argument("--hub", metavar="X,Y", help="the motor axis in the image [px] (default: the marker that holds "
                                                  "still)")
     p.add_argument("--scale", type=float, metavar="M_PER_PX", help="metres per pixel (default: from the rod's "

@@ -99,9 +99,20 @@ def fit_logs(logs: list[Path], params=None, source: str = "", *, nominal, out: P
     from rodctl.ident import fit as F
     from rodctl.ident import report as R
 
+    from rodctl.logs import read_log
+    from rodctl.logs.reader import cut_short
+
     records, digests, meta0, skipped = [], [], None, 0
     for path in logs:
+        digest = E.file_sha256(path)
+        same = next((name for name, d in digests if d == digest), None)
+        if same is not None:  # one experiment fitted twice would weigh twice
+            say(f"fit: skipping {path}: the same log as {same}")
+            continue
         meta, recs = E.records_from_log(path)
+        short = cut_short(read_log(path, columns=["mode_code"]))
+        if short is not None:
+            say(f"fit: warning: {short}; fitting the readable part")
         why = _ended_early(meta)
         if why is not None:
             # the live run fits only the runs that played to their end (a stopped one is played again
@@ -111,7 +122,7 @@ def fit_logs(logs: list[Path], params=None, source: str = "", *, nominal, out: P
             continue
         meta0 = meta0 or meta
         records += recs
-        digests.append((Path(path).name, E.file_sha256(path)))
+        digests.append((Path(path).name, digest))
     if skipped and not digests:
         raise InputError(f"no experiment log played to its end ({skipped} skipped): nothing to fit")
     if params is None:

@@ -114,10 +114,18 @@ def default_jobs() -> int:
         return os.cpu_count() or 1
 
 
+JOBS_PER_CORE_MAX = 4  # local workers beyond this many per core only queue for the cores, each a Python process
+
+
 def check_jobs(jobs: int | None) -> None:
-    """--jobs: None (every core) or at least 1; a command checks it before work that cannot be undone."""
+    """--jobs: None (every core) or 1 to JOBS_PER_CORE_MAX per core; a command checks it before work that cannot
+    be undone."""
     if jobs is not None and jobs < 1:
         raise InputError(f"--jobs {jobs}: must be >= 1")
+    cores = default_jobs()
+    if jobs is not None and jobs > JOBS_PER_CORE_MAX * cores:
+        raise InputError(f"--jobs {jobs}: at most {JOBS_PER_CORE_MAX * cores} local worker processes on these {cores} "
+                         f"cores; --scheduler ADDRESS runs on a Dask cluster")
 
 
 class Runner:

@@ -142,6 +142,10 @@ def check_study(study_dir: str, meta: dict) -> None:
     if folder.exists() and not folder.is_dir():
         raise InputError(f"--study {study_dir}: not a folder")
     meta_path = folder / "study.json"
+    journal = folder / "journal.log"
+    for f in (meta_path, journal):
+        if f.exists() and not f.is_file():
+            raise InputError(f"--study {study_dir}: {f.name} is not a file; use a new --study folder")
     if meta_path.exists():
         try:
             old = json.loads(meta_path.read_text())
@@ -154,7 +158,6 @@ def check_study(study_dir: str, meta: dict) -> None:
         if diff:
             raise InputError(f"--study {study_dir}: made for other inputs ({', '.join(diff)} differ); "
                              f"use a new --study folder")
-    journal = folder / "journal.log"
     if journal.exists():
         with journal.open("rb") as f:
             for number, line in enumerate(f, 1):

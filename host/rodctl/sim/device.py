@@ -59,7 +59,21 @@ def _eeprom_file(eeprom: str | None) -> Path | None:
         raise InputError(f"eeprom={eeprom}: folder {path.parent} does not exist")
     if path.exists() and not os.access(path, os.R_OK):
         raise InputError(f"eeprom={eeprom}: cannot read it")
+    if path.is_file() and not _looks_like_eeprom(path):  # SAVE_RIG would write over someone's own file
+        raise InputError(f"eeprom={eeprom}: not an EEPROM image (the board's rig record starts with 'RG'); "
+                         f"name a new file")
     return path
+
+
+EEPROM_BYTES = 4096  # the Teensy 3.5's EEPROM
+
+
+def _looks_like_eeprom(path: Path) -> bool:
+    """Empty, erased (every byte 0xFF or 0x00), or a rig record however damaged (rod_rig.h: 'R' 'G' ...)."""
+    if path.stat().st_size > EEPROM_BYTES:
+        return False
+    data = path.read_bytes()
+    return data[:2] == b"RG" or not data.strip(b"\xff\x00")
 
 
 def _prototype(lib: ctypes.CDLL) -> ctypes.CDLL:

@@ -234,7 +234,7 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     dets = whole_markers(dets)
     counts = np.array([len(d) for d in dets])
     if not len(dets) or np.median(counts) < MIN_MARKERS_PER_FRAME:
-        raise InputError(f"{video_path}: no markers of the color {detector.lo.tolist()}..{detector.hi.tolist()} "
+        raise InputError(f"{video_path}: no markers of the color {list(detector.color.lo)}..{list(detector.color.hi)} "
                          f"(HSV) in most frames (median {np.median(counts) if len(dets) else 0:g} per frame): "
                          "is this a video of the rod? set the markers' color with --color")
     spots = static_spots(dets)

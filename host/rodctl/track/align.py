@@ -39,6 +39,8 @@ class Alignment:
     angle_offset_rad: float  # camera base angle minus encoder angle, constant part [rad]
     correlation: float  # Pearson r of the fitted base angles [-]
     residual_rad: float  # RMS of the fit [rad]
+    covered: float = 1.0  # share of the usable frames the log covers: the only ones compared [-]
+    covered_s: float = 0.0  # the video time they span, over which the drift is measured [s]
 
     @property
     def drift_ppm(self) -> float:
@@ -116,7 +118,7 @@ def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarr
         raise InputError(f"the video's base angle does not follow the log's (correlation {r:.2f} < "
                          f"{MIN_CORRELATION}): a log of another run?")
     res = float(np.sqrt(np.mean((beta[inside] - model) ** 2)))
-    return Alignment(off, rate, c, r, res)
+    return Alignment(off, rate, c, r, res, float(inside.mean()), float(np.ptp(tau[inside])))
 
 
 def _inside(t: np.ndarray, t_log: np.ndarray, margin_s: float) -> np.ndarray:

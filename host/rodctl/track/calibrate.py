@@ -37,7 +37,11 @@ class View:
             img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
         if img is None:
             raise InputError(f"--calibrate {path}: not an image OpenCV can read")
-        found, corners = cv2.findChessboardCorners(img, inner, cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        try:
+            found, corners = cv2.findChessboardCorners(img, inner,
+                                                       cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        except cv2.error:  # an image too small for its adaptive threshold: no board in it either
+            found = False
         if not found:
             raise InputError(f"--calibrate {path}: no {inner[0]}x{inner[1]} checkerboard (inner corners) found")
         corners = cv2.cornerSubPix(img, corners, (5, 5), (-1, -1),

@@ -20,7 +20,8 @@ class ColorRange:
 
     @classmethod
     def parse(cls, text: str | None) -> "ColorRange":
-        """'H1,S1,V1-H2,S2,V2' (OpenCV units: H 0..179, S and V 0..255); None: the default pink."""
+        """'H1,S1,V1-H2,S2,V2' (OpenCV units: H 0..179, S and V 0..255); H1 > H2 wraps through red (170 to 10:
+        '170,90,90-10,255,255'), as a red or pink marker under warm light straddles hue 0. None: the default pink."""
         if text is None:
             return cls(*DEFAULT_HSV)
         try:
@@ -31,10 +32,23 @@ class ColorRange:
             raise InputError(f"--color {text!r}: expected H1,S1,V1-H2,S2,V2, e.g. 145,90,90-179,255,255") from None
         if len(lo) != 3 or len(hi) != 3:
             raise InputError(f"--color {text!r}: three numbers on each side (H,S,V)")
-        for name, v, top in zip("HSV", zip(lo, hi), (179, 255, 255)):
+        if not (0 <= lo[0] <= 179 and 0 <= hi[0] <= 179):
+            raise InputError(f"--color {text!r}: H must be within 0..179 (low > high wraps through red)")
+        for name, v, top in zip("SV", zip(lo[1:], hi[1:]), (255, 255)):
             if not (0 <= v[0] <= v[1] <= top):
                 raise InputError(f"--color {text!r}: {name} must be 0 <= low <= high <= {top}")
         return cls(lo, hi)
+
+    def mask(self, hsv: np.ndarray) -> np.ndarray:
+        """255 where an HSV image's pixel is in the range, 0 elsewhere (OpenCV's inRange, twice when it wraps)."""
+        import cv2
+
+        lo, hi = np.array(self.lo, np.uint8), np.array(self.hi, np.uint8)
+        if lo[0] <= hi[0]:
+            return cv2.inRange(hsv, lo, hi)
+        top = np.array([179, hi[1], hi[2]], np.uint8)
+        bottom = np.array([0, lo[1], lo[2]], np.uint8)
+        return cv2.inRange(hsv, lo, top) | cv2.inRange(hsv, bottom, hi)
 
 
 class Detector:
@@ -46,8 +60,7 @@ class Detector:
         import cv2
 
         self.cv2 = cv2
-        self.lo = np.array(color.lo, np.uint8)
-        self.hi = np.array(color.hi, np.uint8)
+        self.color = color
         self.max_area = max_area_px
         self.kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
 
@@ -57,7 +70,7 @@ class Detector:
         marker half out of view moved an edge's angle by 4 to 6 deg); out of view, it is not seen."""
         cv2 = self.cv2
         hsv = cv2.cvtColor(frame, cv2.COLOR_BGR2HSV)
-        mask = cv2.inRange(hsv, self.lo, self.hi)
+        mask = self.color.mask(hsv)
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self.kernel)
         n, _, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
         if n <= 1:
