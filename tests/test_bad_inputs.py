@@ -128,6 +128,8 @@ def test_sim_compile_failure_is_one_clear_line(tmp_path):
     ("rod.length=155", "rodctl: rod.length = 155 m is not a testbed's (plausible: 0.02 to 2 m): did you mean 0.155 m?"),
     ("rod.youngs_modulus=593",
      "rodctl: rod.youngs_modulus = 593 Pa is not a testbed's (plausible: 1000 to 2e+11 Pa): did you mean 593000 Pa?"),
+    ("motor.gear_ratio=0.0204",
+     "rodctl: motor.gear_ratio = 0.0204 is not a testbed's (plausible: 1 to 1000): did you mean 20.4?"),
 ])
 def test_a_unit_slip_is_refused_with_the_reading_that_fits(override, line, tmp_path):
     from host_tools import run_rodctl

@@ -434,6 +434,20 @@ def test_log_convert_carries_the_trailer_over_unchanged(tmp_path, src, dst):
     assert lb.meta["converted_from"] == str(a) and cut_short(lb) is None
 
 
+def test_a_closed_csv_copied_while_short_by_whole_rows_reads_as_cut_short(tmp_path):
+    """Cut at a row's end, its sidecars whole (copied before the log was): every row reads, the trailer is there,
+    and only the count its close wrote says rows are missing."""
+    from rodctl.logs.reader import cut_short
+
+    a = tmp_path / "a.csv"
+    _write(a).close({"end": "duration"})
+    lines = a.read_text().splitlines(keepends=True)
+    a.write_text("".join(lines[:101]))  # the header and 100 of the 300 telemetry rows
+    log = read_log(a)
+    assert len(log.data) == 100 and log.meta["rows"] == "300"
+    assert cut_short(log) == f"{a}: cut short (its close counted 300 rows); 100 telemetry frames readable"
+
+
 @pytest.mark.parametrize("dst", ["parquet", "mcap", "csv"])
 def test_log_convert_of_a_cut_short_log_still_reads_as_cut_short(tmp_path, dst):
     from rodctl.logs.reader import cut_short

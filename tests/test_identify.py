@@ -558,6 +558,27 @@ def test_fitting_logs_skips_the_runs_that_did_not_play_to_their_end(tmp_path):
     assert not (tmp_path / "o.toml").exists()
 
 
+def test_a_recording_that_is_no_experiment_is_named_as_such(tmp_path):
+    """A `rodctl log` recording closes with how it ended (here its duration) but names no experiment: it was
+    read as an experiment that "did not play to its end (duration)"."""
+    from rodctl.link import protocol as P
+    from rodctl.logs import LogWriter, simulator_metadata
+
+    p = load_params()
+    log = tmp_path / "run.csv"
+    w = LogWriter(log, simulator_metadata(p), n=p.N)
+    for k in range(100):
+        w.write_telemetry(P.Telemetry(int(P.Mode.BALANCE), 0, 5, p.N, 0, 0.0, 0.02, 0.04, 10, 0, 0, 0,
+                                      (0.0,) * p.N, (0.0,) * p.N), k, k * 1000)
+    w.close({"end": "duration"})
+    r = run_rodctl("identify", str(log), "--out", str(tmp_path / "o.toml"))
+    assert r.returncode == 2
+    assert r.stderr.strip().splitlines() == [
+        f"fit: skipping {log}: not an experiment of rodctl identify (a `rodctl log` recording?)",
+        "rodctl: no experiment log played to its end (1 skipped): nothing to fit"]
+    assert not (tmp_path / "o.toml").exists()
+
+
 def test_fitting_logs_says_which_is_cut_short_and_fits_a_log_given_twice_once(tmp_path):
     """A log copied while it grew (its last row cut in half) is fitted for what it holds, and says so; the same
     file named twice (a glob and a name) is one experiment, not two records."""
@@ -572,7 +593,7 @@ def test_fitting_logs_says_which_is_cut_short_and_fits_a_log_given_twice_once(tm
     cut.write_bytes(data[: len(data) // 2 + 7])
     r = run_rodctl("identify", str(cut), str(whole), str(whole), "--out", str(tmp_path / "o.toml"))
     err = r.stderr.strip().splitlines()
-    assert err[0].startswith(f"fit: warning: {cut}: cut short (1 cut row skipped); ") and \
+    assert err[0].startswith(f"fit: warning: {cut}: cut short (1 cut row skipped; its close counted 500 rows); ") and \
         err[0].endswith(" telemetry frames readable; fitting the readable part"), err
     assert err[1] == f"fit: skipping {whole}: the same log as {whole.name}", err
     assert not any("skipping" in line for line in err[2:]), err

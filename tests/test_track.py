@@ -165,6 +165,8 @@ def test_a_video_without_the_markers_is_refused(filmed, tmp_path):
     (["VIDEO", "--log", "LOG", "--markers", "1"], "--markers 1: between 2 and 64"),
     (["LOG", "--log", "LOG"], "OpenCV cannot read it as a video"),
     (["VIDEO", "--log", "LOG", "--calibrate", "VIDEO", "--board", "2x2"], "--board '2x2': at least 3x3 inner corners"),
+    (["VIDEO", "--log", "LOG", "--board", "9x6"], "--board: describes the checkerboard of --calibrate IMAGE, which is not given"),
+    (["VIDEO", "--log", "LOG", "--hub", "1e9,1e9"], "--hub 1e+09,1e+09: outside the video's 480x360 px image"),
     (["VIDEO", "--log", "FOLDER"], "is a folder, not a file"),
     (["VIDEO", "--log", "LOG", "--at", "nan"], "--at 'nan': times [s] on the log's clock"),
     (["VIDEO", "--log", "LOG", "--at", "1"], "--at 1: times of the figure's shape panels; add --plot PNG"),

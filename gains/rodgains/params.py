@@ -374,9 +374,10 @@ def _implausible(name: str, unit: str, value: float) -> str | None:
     lo, hi = PLAUSIBLE[name]
     if lo <= value <= hi:
         return None
+    u = "" if unit == "-" else f" {unit}"  # a ratio has no unit to name
     guess = next((value * f for f in _UNIT_SLIPS if lo <= value * f <= hi and value != 0), None)
-    hint = f": did you mean {guess:g} {unit}?" if guess is not None else ""
-    return f"{value:g} {unit} is not a testbed's (plausible: {lo:g} to {hi:g} {unit}){hint}"
+    hint = f": did you mean {guess:g}{u}?" if guess is not None else ""
+    return f"{value:g}{u} is not a testbed's (plausible: {lo:g} to {hi:g}{u}){hint}"
 
 
 def _coerce(name: str, key: Key, value: Any) -> Any:

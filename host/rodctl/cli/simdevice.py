@@ -93,11 +93,18 @@ def run_sim_device(args) -> int:
     print(f"connect with: rodctl status --port {link or name}   (Ctrl-C stops the board)", flush=True)
     print(name, flush=True)
     runner.start()
-    t_end = None if args.duration is None else time.monotonic() + args.duration
+    t_start = time.monotonic()
+    t_end = None if args.duration is None else t_start + args.duration
     try:
         with stop_signals():
+            warned = False
             while runner.alive and (t_end is None or time.monotonic() < t_end):
                 time.sleep(0.1)
+                if runner.skipped_steps and not warned:  # a client would see the rod in slow motion
+                    warned = True
+                    print("sim-device: warning: the board cannot keep up with real time on this machine "
+                          f"({dev.describe()}); its clock skips ahead where it fell behind: fewer edges or "
+                          "the inextensible plant keep up", file=sys.stderr, flush=True)
     except KeyboardInterrupt:
         pass
     finally:
@@ -111,7 +118,9 @@ def run_sim_device(args) -> int:
                 link.unlink()
     if runner.error is not None:
         raise UserError(f"virtual board stopped: {type(runner.error).__name__}: {runner.error}")
-    print(f"sim-device: stopped after {dev.time:.1f} s of device time", file=sys.stderr)
+    behind = (f" ({runner.skipped_steps * dev.period:.1f} s skipped: it ran behind real time)"
+              if runner.skipped_steps else "")
+    print(f"sim-device: stopped after {dev.time:.1f} s of device time{behind}", file=sys.stderr)
     return 0
 
 

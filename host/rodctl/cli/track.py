@@ -11,6 +11,8 @@ from rodgains.errors import InputError
 
 from rodctl.cli.outputs import check_output
 
+BOARD_DEFAULT = "9x6"  # the checkerboard's inner corners, COLSxROWS
+SQUARE_DEFAULT_M = 0.02  # its square side [m]
 COVERED_WARN = 0.95  # a log covering less of the video's usable frames than this is said to [-]
 
 
@@ -88,8 +90,14 @@ def run_track_command(args) -> int:
             raise InputError(f"{what} {path}: no such file")
     params = load_params(args.params, args.overrides) if (args.params or args.overrides) else None
     view = None
+    if not args.calibrate and (args.board is not None or args.square is not None):
+        raise InputError(f"{'--board' if args.board is not None else '--square'}: describes the checkerboard of "
+                         "--calibrate IMAGE, which is not given")
     if args.calibrate:
         from rodctl.track.calibrate import View
+
+        args.board = args.board if args.board is not None else BOARD_DEFAULT
+        args.square = args.square if args.square is not None else SQUARE_DEFAULT_M
 
         try:
             cols, rows = (int(v) for v in args.board.lower().split("x"))
@@ -189,8 +197,8 @@ def register(sub) -> None:
                                                                     "length)")
     p.add_argument("--calibrate", metavar="IMAGE", help="a checkerboard held level in the rod's plane: removes the "
                                                         "lens distortion and the tilt, and gives the scale")
-    p.add_argument("--board", default="9x6", metavar="COLSxROWS", help="the checkerboard's inner corners (default 9x6)")
-    p.add_argument("--square", type=float, default=0.02, metavar="M", help="its square side [m] (default 0.02)")
+    p.add_argument("--board", metavar="COLSxROWS", help="the checkerboard's inner corners (default 9x6)")
+    p.add_argument("--square", type=float, metavar="M", help="its square side [m] (default 0.02)")
     p.add_argument("--params", metavar="FILE", help="the rod's parameter file (default: the log's parameters)")
     p.add_argument("--set", metavar="SECTION.KEY=VALUE", action="append", default=[], dest="overrides",
                    help="override one parameter (repeatable)")

@@ -113,6 +113,10 @@ def fit_logs(logs: list[Path], params=None, source: str = "", *, nominal, out: P
         short = cut_short(read_log(path, columns=["mode_code"]))
         if short is not None:
             say(f"fit: warning: {short}; fitting the readable part")
+        if "end" in meta and "experiment" not in meta:  # closed by `rodctl log` or `arm`, not by identify's run
+            say(f"fit: skipping {path}: not an experiment of rodctl identify (a `rodctl log` recording?)")
+            skipped += 1
+            continue
         why = _ended_early(meta)
         if why is not None:
             # the live run fits only the runs that played to their end (a stopped one is played again

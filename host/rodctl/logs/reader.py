@@ -192,18 +192,22 @@ def read_log(path: str | Path, columns: list[str] | None = None) -> Log:
 
 def cut_short(log: "Log") -> str | None:
     """One line saying how much of a log was readable when it was cut short (a kill, a full disk, a
-    copied file still growing): a row cut in half, or no trailer (the logger never closed it). None
-    for a complete log."""
+    copied file still growing): a row cut in half, fewer rows than its close counted, or no trailer (the
+    logger never closed it, or the file is damaged before the trailer). None for a complete log."""
     meta, data = log
     bad = int(meta.get("incomplete_rows", "0") or 0)
     closed = "closed_utc" in meta  # the trailer is written at a clean close
-    if not bad and closed:
+    counted = str(meta.get("rows", ""))  # the telemetry rows the close counted (a copy cut at a row's end)
+    missing = closed and counted.isdigit() and len(data) < int(counted)
+    if not bad and closed and not missing:
         return None
     why = []
     if bad:
         why.append(f"{bad} cut row{'s' if bad != 1 else ''} skipped")
+    if missing:
+        why.append(f"its close counted {counted} rows")
     if not closed:
-        why.append("no trailer: the logger never closed it")
+        why.append("no trailer: the logger never closed it, or the file is damaged before its end")
     return f"{log.path}: cut short ({'; '.join(why)}); {len(data)} telemetry frames readable"
 
 

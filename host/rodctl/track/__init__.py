@@ -228,6 +228,8 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     warnings: list[str] = []
 
     video = Video(video_path)
+    if hub is not None and not (0 <= hub[0] < video.width and 0 <= hub[1] < video.height):
+        raise InputError(f"--hub {hub[0]:g},{hub[1]:g}: outside the video's {video.width}x{video.height} px image")
     detector = Detector(color or ColorRange.parse(None))
     total = video.frames
     dets, same = detect_all(video, detector, (lambda k: progress(k, total)) if progress else None)
