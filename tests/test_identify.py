@@ -529,8 +529,9 @@ def test_ctrl_c_during_the_settle_move_stops_the_motor(tmp_path):
         ["release.csv"], "the settle move is not logged"
 
 
-def _identify_log(path, end: str):
-    """A log as `rodctl identify` closes it, ended `end`; its rod never moves (the fit would refuse it)."""
+def _identify_log(path, end: str, experiment: str | None = "steps"):
+    """A log as `rodctl identify` closes it, ended `end`; its rod never moves (the fit would refuse it).
+    experiment None: closed as `rodctl log` closes a recording, naming no experiment."""
     from rodctl.link import protocol as P
     from rodctl.logs import LogWriter, simulator_metadata
 
@@ -539,7 +540,7 @@ def _identify_log(path, end: str):
     for k in range(500):
         w.write_telemetry(P.Telemetry(int(P.Mode.IDENTIFY), 0, 5, p.N, 0, 0.0, 0.02, 0.04, 10, 0, 0, 0,
                                       (0.0,) * p.N, (0.0,) * p.N), k, k * 1000)
-    w.close({"end": end, "experiment": "steps"})
+    w.close({"end": end} if experiment is None else {"end": end, "experiment": experiment})
     return path
 
 
@@ -561,16 +562,7 @@ def test_fitting_logs_skips_the_runs_that_did_not_play_to_their_end(tmp_path):
 def test_a_recording_that_is_no_experiment_is_named_as_such(tmp_path):
     """A `rodctl log` recording closes with how it ended (here its duration) but names no experiment: it was
     read as an experiment that "did not play to its end (duration)"."""
-    from rodctl.link import protocol as P
-    from rodctl.logs import LogWriter, simulator_metadata
-
-    p = load_params()
-    log = tmp_path / "run.csv"
-    w = LogWriter(log, simulator_metadata(p), n=p.N)
-    for k in range(100):
-        w.write_telemetry(P.Telemetry(int(P.Mode.BALANCE), 0, 5, p.N, 0, 0.0, 0.02, 0.04, 10, 0, 0, 0,
-                                      (0.0,) * p.N, (0.0,) * p.N), k, k * 1000)
-    w.close({"end": "duration"})
+    log = _identify_log(tmp_path / "run.csv", "duration", experiment=None)
     r = run_rodctl("identify", str(log), "--out", str(tmp_path / "o.toml"))
     assert r.returncode == 2
     assert r.stderr.strip().splitlines() == [

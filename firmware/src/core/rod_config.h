@@ -93,9 +93,9 @@
 
 /* The swing-up's stall watch (rod_swingup.h): a half-swing rising no more than this is a stall
  * [rad] (5 deg: Table I's rod on a 10.5 V supply rises 54 and then 21 deg before it is caught;
- * on 10 V it turns back at 148 and then 147 deg); each stall adds the step to the energy target (2 = upright) [-] and multiplies the
- * pump by the gain [-], up to the gain's ceiling [-]. Stalls allowed: ROD_SWING_STALL_STEPS
- * (rod_gains.h, swing_up.stall_steps). */
+ * on 10 V it turns back at 148 and then 147 deg); each stall adds the step to the energy target
+ * (2 = upright) [-] and multiplies the pump by the gain [-], up to the gain's ceiling [-]. Stalls
+ * allowed: ROD_SWING_STALL_STEPS (rod_gains.h, swing_up.stall_steps). */
 #define ROD_SWING_STALL_RISE_RAD 0.0872665f
 #define ROD_SWING_STALL_TARGET_STEP 0.1f
 #define ROD_SWING_STALL_GAIN 1.25f

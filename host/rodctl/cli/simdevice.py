@@ -93,8 +93,7 @@ def run_sim_device(args) -> int:
     print(f"connect with: rodctl status --port {link or name}   (Ctrl-C stops the board)", flush=True)
     print(name, flush=True)
     runner.start()
-    t_start = time.monotonic()
-    t_end = None if args.duration is None else t_start + args.duration
+    t_end = None if args.duration is None else time.monotonic() + args.duration
     try:
         with stop_signals():
             warned = False

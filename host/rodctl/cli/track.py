@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import sys
 from pathlib import Path
 
 from rodgains.atomic_file import replacing
@@ -13,7 +12,6 @@ from rodctl.cli.outputs import check_output
 
 BOARD_DEFAULT = "9x6"  # the checkerboard's inner corners, COLSxROWS
 SQUARE_DEFAULT_M = 0.02  # its square side [m]
-COVERED_WARN = 0.95  # a log covering less of the video's usable frames than this is said to [-]
 
 
 def _pair(text: str | None, what: str) -> tuple[float, float] | None:
@@ -96,16 +94,15 @@ def run_track_command(args) -> int:
     if args.calibrate:
         from rodctl.track.calibrate import View
 
-        args.board = args.board if args.board is not None else BOARD_DEFAULT
-        args.square = args.square if args.square is not None else SQUARE_DEFAULT_M
-
+        board = args.board if args.board is not None else BOARD_DEFAULT
+        square = args.square if args.square is not None else SQUARE_DEFAULT_M
         try:
-            cols, rows = (int(v) for v in args.board.lower().split("x"))
+            cols, rows = (int(v) for v in board.lower().split("x"))
         except ValueError:
-            raise InputError(f"--board {args.board!r}: inner corners as COLSxROWS, e.g. 9x6") from None
+            raise InputError(f"--board {board!r}: inner corners as COLSxROWS, e.g. 9x6") from None
         if cols < 3 or rows < 3:
-            raise InputError(f"--board {args.board!r}: at least 3x3 inner corners, e.g. 9x6")
-        view = View.from_checkerboard(args.calibrate, (cols, rows), args.square)
+            raise InputError(f"--board {board!r}: at least 3x3 inner corners, e.g. 9x6")
+        view = View.from_checkerboard(args.calibrate, (cols, rows), square)
         print(f"calibration: {args.calibrate}, reprojection {view.rms_px:.2f} px, k1 {view.dist.ravel()[0]:+.3f}")
 
     bar = None
@@ -138,10 +135,6 @@ def run_track_command(args) -> int:
     print(f"alignment: the video's first frame at {a.offset_s:.4f} s of the log, clock drift {a.drift_ppm:+.0f} ppm, "
           f"base angle correlation {a.correlation:.4f}, residual {np.degrees(a.residual_rad):.2f} deg, "
           f"camera minus encoder {np.degrees(a.angle_offset_rad):+.2f} deg")
-    if a.covered < COVERED_WARN:
-        print(f"rodctl: warning: the log covers {100 * a.covered:.0f} % of the video's usable frames ({a.covered_s:.1f} s): "
-              "only those are compared, and the clock drift is measured over them (a log cut short, or filming "
-              "started before logging?)", file=sys.stderr)
     print("estimate minus video, per edge:")
     for line in table_lines(r.errors):
         print("  " + line)

@@ -182,14 +182,14 @@ RECORD_COLUMNS = ["mode_code", "device_time_us", "encoder_count", "duty_frac", "
                   "reason_code"]  # what records_from_rows reads
 
 
-def records_from_log(path: str | Path, period: float | None = None) -> tuple[dict, list[Record]]:
-    """(metadata, IDENTIFY records) of a recorded log."""
+def records_from_log(path: str | Path, period: float | None = None, digest: str | None = None):
+    """(the log as read_log reads it, its IDENTIFY records). digest: the file's file_sha256, if known."""
     from rodctl.logs import read_log
 
-    meta, rows = read_log(path, columns=RECORD_COLUMNS)  # a log without one is "no column X", before the fit
+    log = read_log(path, columns=RECORD_COLUMNS)  # a log without one is "no column X", before the fit
     if period is None:
-        period = float(meta.get("period_us", 1000)) * 1e-6
-    return meta, records_from_rows(rows, period, Path(path).stem, file_sha256(path))
+        period = float(log.meta.get("period_us", 1000)) * 1e-6
+    return log, records_from_rows(log.data, period, Path(path).stem, digest or file_sha256(path))
 
 
 # ---- the same experiment through the SIL (tests, benchmarks, `rodctl identify` acceptance) ----------

@@ -99,7 +99,6 @@ def fit_logs(logs: list[Path], params=None, source: str = "", *, nominal, out: P
     from rodctl.ident import fit as F
     from rodctl.ident import report as R
 
-    from rodctl.logs import read_log
     from rodctl.logs.reader import cut_short
 
     records, digests, meta0, skipped = [], [], None, 0
@@ -109,8 +108,9 @@ def fit_logs(logs: list[Path], params=None, source: str = "", *, nominal, out: P
         if same is not None:  # one experiment fitted twice would weigh twice
             say(f"fit: skipping {path}: the same log as {same}")
             continue
-        meta, recs = E.records_from_log(path)
-        short = cut_short(read_log(path, columns=["mode_code"]))
+        log, recs = E.records_from_log(path, digest=digest)
+        meta = log.meta
+        short = cut_short(log)
         if short is not None:
             say(f"fit: warning: {short}; fitting the readable part")
         if "end" in meta and "experiment" not in meta:  # closed by `rodctl log` or `arm`, not by identify's run

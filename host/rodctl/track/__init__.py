@@ -36,6 +36,7 @@ WHOLE_AREA_SHARE = 0.7  # a blob smaller than this share of the median marker is
 MERGED_AREA_SHARE = 1.7  # a blob this much larger than the median marker is two run together (or not a marker)
 REACH_SHARE = 1.2  # a blob farther from the axis than this share of the rod's length is not on the rod
 MIN_MARKERS_PER_FRAME = 2  # median detections per frame below this: not a video of the rod's markers
+COVERED_WARN = 0.95  # a log covering less of the video's usable frames than this is said to [-]
 
 
 @dataclass
@@ -267,6 +268,10 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     base = base_tangent(markers_m, length)
     base[ok] = np.unwrap(base[ok])
     al = align(tau[ok], base[ok], t_log, th_log, video.fps)
+    if al.covered < COVERED_WARN:
+        warnings.append(f"the log covers {100 * al.covered:.0f} % of the video's usable frames ({al.covered_s:.1f} s): "
+                        "only those are compared, and the clock drift is measured over them (a log cut short, or "
+                        "filming started before logging?)")
     t = al.log_time(tau)
     c = al.angle_offset_rad
     # without a board nothing in the picture is level: the camera's roll is the constant the
