@@ -195,7 +195,7 @@ def test_identify_refuses_an_unknown_case_set_before_anything_runs(tmp_path):
 
 def check_written_compensation(out, stdout: str) -> None:
     """The file `rodctl identify` wrote carries ratio x its identified Coulomb friction, and every candidate's
-    measured result (used by test_identify's run over sim://)."""
+    measured result (used by test_identify_runs' run over sim://)."""
     p = load_params(out)
     text = out.read_text()
     chosen = [ln for ln in text.splitlines() if ln.startswith("# ^ rodctl identify: chosen by the robustness matrix")]

@@ -186,7 +186,7 @@ def test_pumping_past_the_rigid_upright_energy_catches_a_short_stiff_rod():
     steady swing that peaks just outside the catch window, so it is never caught; the stall watch lifts that
     swing after a few half-swings, and the default target (1.05) catches it on the first approach
     (docs/scenarios.md, "Swing-up: energy pumping")."""
-    from test_identify import hidden_params
+    from hidden_rigs import hidden_params
 
     rig = hidden_params("C").with_overrides(*matrix.IDEAL_GEARBOX)
     assert rig["swing_up"]["energy_target"] == 1.05
@@ -237,7 +237,7 @@ def test_past_its_clamped_buckling_length_the_rod_ends_bent_and_the_table_says_w
 def test_the_matrix_cases_past_the_buckling_length_of_a_rig():
     """Table I's rod keeps every case short of it (E -15 %: 0.994 x); hidden rig B (E 5.2e5 Pa, 0.983 x)
     is pushed past it by three cases (docs/identification.md)."""
-    from test_identify import hidden_params
+    from hidden_rigs import hidden_params
 
     assert matrix.buckled_cases(load_params()) == {}
     past = matrix.buckled_cases(hidden_params("B"))
