@@ -334,6 +334,34 @@ def test_ctrl_c_anywhere_is_one_line_and_exit_130(monkeypatch, capsys):
     assert capsys.readouterr().err == "rodctl: interrupted\n"
 
 
+def test_sigterm_stops_a_device_command_as_ctrl_c_does_and_is_named(capsys):
+    """A device command under stop_signals: SIGTERM (a service manager, `timeout`) unwinds it as Ctrl-C would,
+    exit 130, and the line names the signal instead of a Ctrl-C nobody pressed."""
+    import argparse
+    import os
+    import signal
+    import time
+
+    import rodctl.cli as cli
+    from rodctl.cli.common import stop_signals
+
+    cleaned = []
+
+    def command(args):
+        with stop_signals():
+            try:
+                os.kill(os.getpid(), signal.SIGTERM)
+                time.sleep(5)
+            finally:
+                cleaned.append(True)  # where a command disarms and closes its log
+        return 0
+
+    before = signal.getsignal(signal.SIGTERM)
+    assert cli._main(argparse.ArgumentParser(), argparse.Namespace(func=command)) == 130
+    assert capsys.readouterr().err == "rodctl: stopped by SIGTERM\n" and cleaned == [True]
+    assert signal.getsignal(signal.SIGTERM) is before
+
+
 def test_an_early_ctrl_c_of_rodctl_log_is_one_line_exit_130_and_arms_nothing(tmp_path):
     """A Ctrl-C before the board answered: rodctl says so in one line, exits 130, arms nothing, writes no log."""
     import os

@@ -77,13 +77,15 @@ def test_sigkill_of_log_leaves_a_readable_csv_and_a_board_that_disarms_itself(tm
     assert "closed_utc" not in meta  # no clean close happened
 
 
-def test_ctrl_c_of_log_leaves_a_valid_file_and_disarms(tmp_path):
+@pytest.mark.parametrize("sig, ended", [(signal.SIGINT, "Ctrl-C"), (signal.SIGTERM, "SIGTERM")])
+def test_ctrl_c_or_sigterm_of_log_leaves_a_valid_file_and_disarms(tmp_path, sig, ended):
+    """SIGTERM (a service manager, `timeout`) stops as Ctrl-C does, and the log's trailer says which it was."""
     out = tmp_path / "interrupted.csv"
     with sim_device() as (dev, pts):
         log = start_rodctl("log", "--port", pts, "--arm", "balance", "--out", str(out))
         try:
             _wait_rows(out, 1500)
-            log.send_signal(signal.SIGINT)
+            log.send_signal(sig)
             _, err = log.communicate(timeout=20)
         finally:
             if log.poll() is None:
@@ -108,7 +110,7 @@ def test_ctrl_c_of_log_leaves_a_valid_file_and_disarms(tmp_path):
 
     log = read_log(out)
     meta, data = log
-    assert meta["end"] == "Ctrl-C" and meta["incomplete_rows"] == "0"
+    assert meta["end"] == ended and meta["incomplete_rows"] == "0"
     ev = log.events
     frame_events = ev[np.isin(ev["event_name"], ["HELLO", "ACK"])]
     assert int(meta["frames"]) == len(data) + len(frame_events) + int(meta["heartbeat_acks"]) and \

@@ -85,8 +85,8 @@ def main(argv: list[str] | None = None) -> int:
         if _SIGINTS[0]:
             raise KeyboardInterrupt
         return _main(parser, args)
-    except KeyboardInterrupt:
-        _interrupted()
+    except KeyboardInterrupt as e:
+        _interrupted(e)
         return 130
     finally:
         if deferred:  # Python's own again, for a caller of main() in the same process
@@ -103,9 +103,10 @@ def _restore_sigint() -> None:
         pass
 
 
-def _interrupted() -> None:
+def _interrupted(e: KeyboardInterrupt) -> None:
+    name = getattr(e, "signal_name", None)  # rodctl.link.attach.Stopped, not imported: main() stays light
     try:
-        print("rodctl: interrupted", file=sys.stderr, flush=True)
+        print(f"rodctl: stopped by {name}" if name else "rodctl: interrupted", file=sys.stderr, flush=True)
     except (OSError, ValueError, KeyboardInterrupt):
         pass
 
@@ -123,8 +124,8 @@ def _main(parser, args) -> int:
     except UserError as e:
         print(f"rodctl: {e}", file=sys.stderr)
         return e.exit_code
-    except KeyboardInterrupt:
-        _interrupted()
+    except KeyboardInterrupt as e:
+        _interrupted(e)
         return 130
     except BrokenPipeError:
         return 0

@@ -14,6 +14,7 @@ from pathlib import Path
 from rodgains.errors import InputError
 
 from rodctl.link import protocol as P
+from rodctl.link.attach import Stopped
 from rodctl.link.session import Session, is_tty, mode_text
 from rodctl.logs.schema import from_upright_deg
 
@@ -129,13 +130,13 @@ def status_text(s: Session, fps: float, rows: int | None = None) -> str:
 
 @contextlib.contextmanager
 def stop_signals():
-    """SIGTERM and SIGHUP stop like Ctrl-C (KeyboardInterrupt in the main thread)."""
+    """SIGTERM and SIGHUP stop like Ctrl-C (a KeyboardInterrupt in the main thread, `Stopped` to say which)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def raise_interrupt(signum, frame):
-        raise KeyboardInterrupt
+        raise Stopped(signal.Signals(signum).name)
 
     old = {}
     for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):

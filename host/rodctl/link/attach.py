@@ -3,13 +3,14 @@ wait until Ctrl-C, a duration or an error; then disarm, close the log with the l
 
     a = attach(session, args, out="run.csv", fmt="csv", arm_mode=P.ArmMode.BALANCE, duration_s=10.0,
                started=say_start, armed=say_armed, tick=show_status, stopping=end_status)
-    a.ended, a.counters, a.writer     # "end" | "duration" | "Ctrl-C" | "error"; the link's counters; the log
+    a.ended, a.counters, a.writer     # "end" | "duration" | "Ctrl-C" | "SIGTERM" | "SIGHUP" | "error"; the
+                                      # link's counters; the log
     if a.error is not None:           # kept, not raised: the caller says what was written first
         raise a.error
 
 Nothing here prints: what the terminal shows goes through the callbacks. Signals are the caller's: a
-KeyboardInterrupt ends the attach as "Ctrl-C", and `shield` may hold further ones off while the board is
-disarmed and the log closed.
+KeyboardInterrupt ends the attach as "Ctrl-C" (a `Stopped` one under its signal's name), and `shield` may hold
+further ones off while the board is disarmed and the log closed.
 """
 
 from __future__ import annotations
@@ -29,6 +30,21 @@ if TYPE_CHECKING:
     from rodgains.params import Params
 
     from rodctl.logs.writer import LogWriter
+
+
+class Stopped(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, stopping a command as Ctrl-C does (the board disarmed, the log closed), but logged and
+    said under the signal's own name: a log ended by a service manager or `timeout` is not a user's Ctrl-C."""
+
+    def __init__(self, signal_name: str):
+        super().__init__(signal_name)
+        self.signal_name = signal_name
+
+
+def stopped_by(e: KeyboardInterrupt) -> str:
+    """How an interrupt ended a command, as a log's trailer records it: "Ctrl-C", or the stop signal's name."""
+    return e.signal_name if isinstance(e, Stopped) else "Ctrl-C"
+
 
 POLL_S = 0.05  # how often the link, the log and the status are looked at while attached [s]
 
@@ -89,8 +105,8 @@ def attach(session: Session, design_args=None, *, out: str | None = None, fmt: s
             if a.writer is not None:
                 a.writer.maybe_flush()
             tick(a)
-    except KeyboardInterrupt:
-        a.ended = "Ctrl-C"
+    except KeyboardInterrupt as e:
+        a.ended = stopped_by(e)
     except BaseException as e:  # noqa: BLE001 - the log closed first, then the error
         a.ended = "error"
         a.error = e
