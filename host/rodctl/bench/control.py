@@ -1,9 +1,9 @@
 """The faithful-rod control goals of issues 8 and 31, measured (deterministic simulations, not speeds):
 nominal balance and swing-up on the faithful plant (1 deg of gearbox play, the boot zero half a count
 off), the swing-up on a supply below the file's, the torque once balanced, 3 deg of play, the boot
-zero at six places within its count, the robustness matrix's pass count, and the longest rod balanced from 10 deg as a ratio to the continuum
-critical length (base only, and with the tip IMU with and without the play), and with the tip IMU the
-rods 15 % softer and denser under a design made for each."""
+zero at six places within its count, the robustness matrix's pass count, and the longest rod balanced
+from 10 deg as a ratio to the continuum critical length (base only, and with the tip IMU with and
+without the play), and with the tip IMU the rods 15 % softer and denser under a design made for each."""
 
 from __future__ import annotations
 

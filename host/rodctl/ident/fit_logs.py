@@ -98,7 +98,6 @@ def fit_logs(logs: list[Path], params=None, source: str = "", *, nominal, out: P
     from rodctl.ident import experiments as E
     from rodctl.ident import fit as F
     from rodctl.ident import report as R
-
     from rodctl.logs.reader import cut_short
 
     records, digests, meta0, skipped = [], [], None, 0

@@ -250,8 +250,9 @@ def demo(folder, fps: float = 120.0, seconds: float = 8.0, *, scene: RodScene | 
          filming: Filming | None = None, params=None) -> dict:
     """A filmed simulated run in `folder`: run.csv (+ .truth.csv), run.mp4 and board.png (a checkerboard
     9x6, 20 mm, in the rod's plane). The swing-up is slowed (swing_up.amplitude TEST_SWING_AMPLITUDE) and
-    its stall watch is off (it would raise the pump at the plateau) so the rod swings through the whole clip; the camera adds tilt, distortion, noise, blur, two repeated
-    frames and a hand over marker 3. Returns the paths and the filming."""
+    its stall watch is off (it would raise the pump at the plateau) so the rod swings through the whole
+    clip; the camera adds tilt, distortion, noise, blur, two repeated frames and a hand over marker 3.
+    Returns the paths and the filming."""
     import cv2
     from rodgains.params import load_params
 
