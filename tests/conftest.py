@@ -1,7 +1,8 @@
 """What every test's code sees of the machine: the design cache is the clone's build/test-design-cache,
 not the user's ~/.cache/rodgains, so results and run time never depend on earlier runs of rodctl on
 this machine or on HOME. Set here, at import, so the rodctl subprocesses the tests start inherit it;
-the tests of the cache itself set their own folder (tests/test_design_cache.py).
+the tests of the cache itself set their own folder (tests/test_design_cache.py). BLAS runs one thread,
+as under `rodctl` (cli.one_blas_thread).
 
 What runs is chosen on the command line only: --full-reference adds the tests marked full_reference."""
 
@@ -12,6 +13,9 @@ from pathlib import Path
 
 import pytest
 
+from rodctl.cli import one_blas_thread
+
+one_blas_thread()  # as `rodctl` does, for the code the tests run in this process
 os.environ["RODGAINS_CACHE_DIR"] = str(Path(__file__).resolve().parents[1] / "build" / "test-design-cache")
 
 

@@ -196,6 +196,19 @@ def test_live_plot_runs_in_a_window_under_a_virtual_display():
     assert lines[-1] == "scope ended: disarmed", r.stderr
 
 
+def test_rodctl_runs_blas_on_one_thread_unless_the_user_chose_more(monkeypatch, capsys):
+    """--jobs shares the cores out among whole runs; a BLAS pool in each would only spin on them. A user's
+    own setting is kept, and what main() sets is in the environment the workers it starts inherit."""
+    for name in cli.BLAS_THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "3")
+    with pytest.raises(SystemExit):
+        cli.main(["--version"])
+    assert capsys.readouterr().out.startswith("rodctl ")
+    assert os.environ["OPENBLAS_NUM_THREADS"] == "3"
+    assert os.environ["MKL_NUM_THREADS"] == os.environ["OMP_NUM_THREADS"] == "1"
+
+
 def test_help_texts_print_their_percent_signs_once():
     from host_tools import run_rodctl
 

@@ -33,6 +33,20 @@ def build_parser():
     return parser
 
 
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OMP_NUM_THREADS")
+
+
+def one_blas_thread() -> None:
+    """One BLAS thread unless the user set otherwise, before numpy loads (the pools read it once). rodctl's
+    matrices have at most a few hundred rows, too small for a BLAS pool to share out; its threads only
+    spin, on the cores --jobs gives to whole runs (a robustness matrix: 20 % less CPU with one).
+    Set in the environment, so the --jobs workers and a sim:// board's process start with it too."""
+    import os
+
+    for name in BLAS_THREAD_VARIABLES:
+        os.environ.setdefault(name, "1")
+
+
 _SIGINTS = [0]  # Ctrl-Cs seen since main() started
 
 
@@ -72,6 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     While the command modules load (most of the first half second), a Ctrl-C is only noted and acted on
     once they have: raised inside an import it can be swallowed by a library's bare `except:` (the
     command would then go on, and arm) or leave the interpreter to kill itself with SIGINT at exit."""
+    one_blas_thread()
     _SIGINTS[0] = 0
     deferred = False
     try:
