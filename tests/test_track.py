@@ -355,7 +355,10 @@ def test_frames_left_out_with_their_timestamps_are_timed_by_the_container(filmed
     f, a = d["filming"], r.alignment
     assert abs(a.offset_s - f.offset_s) <= 1.0 / 120, a
     assert abs(a.drift_ppm - f.drift_ppm) <= DRIFT_PPM, a
-    assert abs(a.drift_ppm - tracked[120].alignment.drift_ppm) <= 20.0  # the whole clip's fit
+    # the whole clip's fit: each frame put at the same log time within a tenth of a frame. Not the drift
+    # itself: over 6 s it moves by 30 ppm (0.2 ms at the clip's end) with the sensor noise's draw alone
+    whole, video_t = tracked[120].alignment, np.arange(720) / 120
+    assert np.abs(a.log_time(video_t) - whole.log_time(video_t)).max() <= 0.1 / 120, (a, whole)
 
 
 def test_a_rolled_camera_without_calibration_is_levelled(filmed, tmp_path):

@@ -19,6 +19,8 @@ import numpy as np
 MARKER_BGR = (170, 60, 245)
 ROD_BGR = (95, 100, 105)
 HAND_BGR = (120, 160, 215)
+NOISE_FIELDS = 4  # pre-drawn noise fields a frame's noise is cut from (RodScene._noise)
+NOISE_MARGIN_PX = 64  # how far a frame's window may move in them [px]
 
 
 @dataclass
@@ -38,6 +40,7 @@ class RodScene:
     _rng: np.random.Generator = field(init=False, repr=False)
     _maps: tuple | None = field(init=False, default=None, repr=False)
     _background: np.ndarray | None = field(init=False, default=None, repr=False)
+    _noise_fields: np.ndarray | None = field(init=False, default=None, repr=False)
 
     def __post_init__(self):
         self._rng = np.random.default_rng(self.seed)
@@ -73,6 +76,18 @@ class RodScene:
             self._maps = (sx.astype(np.float32), sy.astype(np.float32))
             self._cv2 = cv2
         return self._maps
+
+    def _noise(self) -> np.ndarray:
+        """One frame's sensor noise [grey levels]: a window at a random place in one of NOISE_FIELDS
+        Gaussian fields drawn once. Every pixel's noise is still independent of its neighbours' and of
+        its own in other frames (two frames share a window one time in 16,000); drawing a fresh field
+        per frame cost most of a frame's rendering."""
+        h, w = self.height, self.width
+        if self._noise_fields is None:
+            shape = (NOISE_FIELDS, h + NOISE_MARGIN_PX, w + NOISE_MARGIN_PX, 3)
+            self._noise_fields = self._rng.standard_normal(shape, dtype=np.float32) * np.float32(self.noise_std)
+        k, dy, dx = self._rng.integers((NOISE_FIELDS, NOISE_MARGIN_PX, NOISE_MARGIN_PX))
+        return self._noise_fields[k, dy:dy + h, dx:dx + w]
 
     # --- one frame --------------------------------------------------------------------------
     def to_px(self, xy_m: np.ndarray) -> np.ndarray:
@@ -112,7 +127,7 @@ class RodScene:
             mx, my = self._warp_maps()
             acc = cv2.remap(acc, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         if self.noise_std:
-            acc += self._rng.normal(0.0, self.noise_std, acc.shape).astype(np.float32)
+            acc += self._noise()
         return np.clip(acc, 0, 255).astype(np.uint8)
 
 
@@ -183,6 +198,14 @@ class Filming:
         return self.offset_s + (1.0 + self.drift_ppm * 1e-6) * np.asarray(k) / self.fps
 
 
+def _interp_rows(t: float, tt: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """rows (one per time tt, increasing) linearly interpolated at time t, held at the ends (np.interp's
+    rule for every column at once)."""
+    i = int(np.clip(np.searchsorted(tt, t, side="right") - 1, 0, len(tt) - 2))
+    w = min(max((t - tt[i]) / (tt[i + 1] - tt[i]), 0.0), 1.0)
+    return rows[i] + w * (rows[i + 1] - rows[i])
+
+
 def film(scene: RodScene, filming: Filming, t_truth: np.ndarray, theta_truth: np.ndarray, lengths: np.ndarray,
          marker_s: np.ndarray):
     """BGR frames of a simulated run (truth: time [s] and each plant edge's absolute angle, the plant's
@@ -198,7 +221,7 @@ def film(scene: RodScene, filming: Filming, t_truth: np.ndarray, theta_truth: np
         for j in range(scene.blur_subframes):
             frac = (j + 0.5) / scene.blur_subframes - 0.5
             t = float(filming.log_time(k)) + frac * scene.exposure_s
-            th = np.array([np.interp(t, t_truth, theta_truth[:, i]) for i in range(theta_truth.shape[1])])
+            th = _interp_rows(t, t_truth, theta_truth)
             nodes = rod_nodes(th, lengths)
             markers = np.vstack([np.zeros((1, 2)), points_at(nodes, s_nodes, marker_s)])
             shapes.append((nodes, markers))
