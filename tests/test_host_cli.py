@@ -209,6 +209,14 @@ def test_rodctl_runs_blas_on_one_thread_unless_the_user_chose_more(monkeypatch, 
     assert os.environ["MKL_NUM_THREADS"] == os.environ["OMP_NUM_THREADS"] == "1"
 
 
+def test_values_that_start_with_a_minus_are_values_not_options(tmp_path):
+    """A hub left of the image and a time before the log's start, as a user types them (no `=`)."""
+    args = cli.build_parser().parse_args(["track", "v.mp4", "--log", "l.csv", "--hub", "-10,-12", "--at", "-1e-3,2"])
+    assert (args.hub, args.at) == ("-10,-12", "-1e-3,2")
+    r = run_rodctl("track", str(tmp_path / "v.mp4"), "--log", str(tmp_path / "l.csv"), "--hub", "-10,-12", "-x")
+    assert r.returncode == 2 and "unrecognized arguments: -x" in r.stderr  # a word is still an option
+
+
 def test_help_texts_print_their_percent_signs_once():
     from host_tools import run_rodctl
 

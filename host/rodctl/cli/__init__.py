@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 
 # Subcommand modules, each with register(subparsers); imported lazily-light so `rodctl gains` starts fast.
@@ -12,6 +13,14 @@ COMMAND_MODULES = ["gains", "protocol", "docs", "sil", "status", "check", "recor
 class OneLineParser(argparse.ArgumentParser):
     """argparse's refusals as every other of rodctl's: one line, exit 2 (the usage is behind --help).
     Subcommand parsers are made of the same class."""
+
+    # a value that starts with a minus and reads as numbers is a value, not an option: argparse's own rule
+    # takes only -3 and -0.5, so `--hub -10,-12` or `--value -1e-3` would be refused as options
+    NEGATIVE_NUMBERS = re.compile(r"^-(\d+\.?\d*|\.\d+)(e[-+]?\d+)?(,-?(\d+\.?\d*|\.\d+)(e[-+]?\d+)?)*$", re.I)
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = self.NEGATIVE_NUMBERS
 
     def error(self, message):
         self.exit(2, f"{self.prog}: {message}; see {self.prog} --help\n")
