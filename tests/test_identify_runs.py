@@ -291,12 +291,14 @@ def test_fitting_logs_skips_the_runs_that_did_not_play_to_their_end(tmp_path):
     them, saying so, instead of fitting their first seconds."""
     stopped = _identify_log(tmp_path / "identify-1-steps.csv", "stopped: swung 48 deg from hanging (soft limit 48 deg)")
     cut = _identify_log(tmp_path / "identify-1-chirp.csv", "error")
-    r = run_rodctl("identify", str(stopped), str(cut), "--out", str(tmp_path / "o.toml"))
+    killed = _identify_log(tmp_path / "identify-1-prbs.csv", "interrupted: SIGTERM")
+    r = run_rodctl("identify", str(stopped), str(cut), str(killed), "--out", str(tmp_path / "o.toml"))
     assert r.returncode == 2, r.stderr
     err = r.stderr.strip().splitlines()
     assert f"fit: skipping {stopped}: the experiment did not play to its end (stopped: swung 48 deg" in err[0]
-    assert err[1] == f"fit: skipping {cut}: the experiment did not play to its end (interrupted: Ctrl-C or a lost link)"
-    assert err[-1] == "rodctl: no experiment log played to its end (2 skipped): nothing to fit"
+    assert err[1] == f"fit: skipping {cut}: the experiment did not play to its end (interrupted: a lost link or an error)"
+    assert err[2] == f"fit: skipping {killed}: the experiment did not play to its end (interrupted: SIGTERM)"
+    assert err[-1] == "rodctl: no experiment log played to its end (3 skipped): nothing to fit"
     assert not (tmp_path / "o.toml").exists()
 
 
@@ -343,7 +345,7 @@ def test_ctrl_c_mid_experiment_disarms_and_counts_only_the_complete_runs(tmp_pat
     from rodctl.logs import read_log
 
     log = read_log(chirp, columns=["mode_code"])
-    assert log.trailer["end"] == "error"
+    assert log.trailer["end"] == "interrupted: Ctrl-C"
     assert int(log.data["mode_code"][-1]) == 0, "the board is DISARMED in the last frame logged"
     assert not (tmp_path / "o.toml").exists() and not (tmp_path / "o.png").exists()
 

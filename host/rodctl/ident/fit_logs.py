@@ -18,12 +18,13 @@ from rodgains.errors import InputError
 
 def _ended_early(meta: dict) -> str | None:
     """How an experiment log of `rodctl identify` ended when it did not play to its end ("stopped: swung
-    ..." past the soft limit, "interrupted: ..." where the log says "error" (a Ctrl-C or a lost link), "fault",
-    "timeout"); None for a complete run, or a log without that record (another tool's, or one a kill cut off)."""
+    ..." past the soft limit, "interrupted: Ctrl-C" or the stop signal's name, "interrupted: a lost link or an
+    error" where the log says "error", "fault", "timeout"); None for a complete run, or a log without that
+    record (another tool's, or one a kill cut off)."""
     end = meta.get("end")
     if end in (None, "", "done"):
         return None
-    return "interrupted: Ctrl-C or a lost link" if end == "error" else str(end)
+    return "interrupted: a lost link or an error" if end == "error" else str(end)
 
 
 def incomplete_run(path: Path) -> str | None:

@@ -137,6 +137,11 @@ def run_experiment(session, exp, log_path: Path | None, params, params_source: s
         time.sleep(0.1)  # the frames already on their way
         ended = "fault" if last.mode == P.Mode.FAULT else "done"
         return log_path, last
+    except KeyboardInterrupt as e:
+        from rodctl.link.attach import stopped_by
+
+        ended = f"interrupted: {stopped_by(e)}"
+        raise
     finally:
         if ended != "done" and not ended.startswith("stopped"):
             try:
