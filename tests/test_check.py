@@ -221,6 +221,15 @@ def test_fix_stores_nothing_it_could_not_measure(tmp_path):
     assert not (tmp_path / "e.bin").exists()
 
 
+def test_fix_without_an_answer_stores_nothing_and_says_how_to_store(tmp_path):
+    """--fix asks before it writes the board's EEPROM; a closed input (a script, a pipe) is no yes."""
+    r, lines = check(f"sim://?motor_sign=-1&eeprom={tmp_path / 'e.bin'}", "--fix", input="")
+    assert r.returncode == 1 and lines["motor"].startswith("FAIL"), r.stdout
+    assert r.stderr.rstrip().endswith("Store motor_sign=-1 on the board? [y/N] fix: not stored (no answer: the input "
+                                      "is closed; --fix --yes stores without asking)"), r.stderr
+    assert not (tmp_path / "e.bin").exists()
+
+
 def test_unreadable_stored_settings_fall_back_to_the_compiled_defaults_and_say_so(tmp_path):
     bad = tmp_path / "eeprom.bin"
     bad.write_bytes(b"RG\x01\xff\x01\x00\x12\x34")  # a record with a wrong CRC

@@ -36,8 +36,10 @@ def _fix(session, report, yes: bool) -> None:
     text = ", ".join(f"{k}={v:+d}" for k, v in report.fixes.items())
     if not yes:
         print(f"Store {text} on the board? [y/N] ", end="", file=sys.stderr, flush=True)
-        if sys.stdin.readline().strip().lower() not in ("y", "yes"):
-            print("fix: not stored", file=sys.stderr)
+        answer = sys.stdin.readline()
+        if answer.strip().lower() not in ("y", "yes"):
+            closed = "" if answer else " (no answer: the input is closed; --fix --yes stores without asking)"
+            print(f"fix: not stored{closed}", file=sys.stderr)
             return
     now = store_signs(session, report.fixes)
     report.stored = {k: int(now[k]) for k in report.fixes}
