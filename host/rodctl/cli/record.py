@@ -69,7 +69,7 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
               file=sys.stderr, flush=True)
     if a.error is not None:
         raise a.error
-    if ended in ("Ctrl-C", "SIGTERM", "SIGHUP") and session.hello is None:  # nothing armed or written yet
+    if a.interrupted and session.hello is None:  # nothing armed or written yet
         print("rodctl: interrupted before the board answered; nothing was armed or written", file=sys.stderr,
               flush=True)
         return 130

@@ -62,6 +62,11 @@ class Attached:
     counters: dict[str, int] = field(default_factory=dict)
     error: BaseException | None = None
 
+    @property
+    def interrupted(self) -> bool:
+        """Ended by Ctrl-C or a stop signal (`stopped_by`'s names), not by its end, its duration or an error."""
+        return self.ended not in ("end", "duration", "error")
+
 
 def _nothing(*_args) -> None:
     pass
