@@ -274,6 +274,8 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
                         "filming started before logging?)")
     t = al.log_time(tau)
     c = al.angle_offset_rad
+    if al.mirrored:  # the rod seen from behind its plane: x about the axis turned back
+        markers_m = markers_m * np.array([-1.0, 1.0])
     # without a board nothing in the picture is level: the camera's roll is the constant the
     # alignment measured (less whole turns); with one, the board's rows are level
     roll = float(c - np.round(c / (2 * np.pi)) * 2 * np.pi) if view is None else 0.0
@@ -289,6 +291,9 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     settled = settle_time(t_log, np.asarray(data["mode_code"]))
     tracked = on_branch(np.where(ok[:, None], theta, np.nan), est)
     errors = error_table(t, tracked, est, settled)
+    if al.mirrored and say is not None:
+        say("mirrored: the rod turns against the encoder in the picture (filmed from behind the rod's plane, or a "
+            "mirrored camera): its x is turned back about the axis")
     if view is None and say is not None:
         say(f"level: no --calibrate, so the camera's roll is taken to be the alignment's camera minus encoder "
             f"({np.degrees(roll):+.2f} deg) and is removed from every angle")

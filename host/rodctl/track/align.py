@@ -3,7 +3,10 @@
     log time = offset + rate * video time
 
 found by the normalized cross-correlation of the camera's base angle (the first edge) with the
-encoder's, then a least-squares fit of offset, rate and a constant angle (the camera's roll and
+encoder's, and with its negative: a camera behind the rod's plane (or a selfie camera's mirrored
+picture) sees the rod turn the other way, and a swing's negative correlates with a half-period
+shift of itself (0.98 on the demo), so a mirrored video is found by the sign that fits better,
+not refused as another run's. Then a least-squares fit of offset, rate and a constant angle (the camera's roll and
 the encoder's zero) on the log's samples, interpolated, over the frames the log covers (the video
 may start before the log or end after it). Refused when the best correlation is too weak to trust
 (the video and the log are not of the same run), or when the fit ends at its limits (a drift of
@@ -41,6 +44,7 @@ class Alignment:
     residual_rad: float  # RMS of the fit [rad]
     covered: float = 1.0  # share of the usable frames the log covers: the only ones compared [-]
     covered_s: float = 0.0  # the video time they span, over which the drift is measured [s]
+    mirrored: bool = False  # the camera sees the rod turn against the encoder: its angles were negated
 
     @property
     def drift_ppm(self) -> float:
@@ -80,7 +84,8 @@ def _coarse(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.nda
 
 def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarray, fps: float) -> Alignment:
     """tau: video times of the usable frames [s]; beta: the rod's base angle in them [rad] (unwrapped;
-    rodctl.track.shape.base_tangent); t_log, th_log: the log's time [s] and encoder angle [rad]."""
+    rodctl.track.shape.base_tangent); t_log, th_log: the log's time [s] and encoder angle [rad]. A
+    mirrored video's alignment is of -beta (Alignment.mirrored)."""
     from scipy.optimize import least_squares
 
     if len(tau) < 20:
@@ -89,6 +94,10 @@ def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarr
         raise InputError(f"the rod's base moves {np.degrees(np.ptp(beta)):.1f} deg in the video: too little to "
                          "align it with the log (swing the rod by hand at the start of the run)")
     offset0, r0 = _coarse(tau, beta, t_log, th_log, 1.0 / fps)
+    offset_m, r_m = _coarse(tau, -beta, t_log, th_log, 1.0 / fps)
+    mirrored = r_m > r0
+    if mirrored:
+        beta, offset0, r0 = -beta, offset_m, r_m
     if r0 < MIN_CORRELATION:
         raise InputError(f"the video's base angle does not follow the log's (best correlation {r0:.2f} < "
                          f"{MIN_CORRELATION}): a log of another run?")
@@ -118,7 +127,7 @@ def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarr
         raise InputError(f"the video's base angle does not follow the log's (correlation {r:.2f} < "
                          f"{MIN_CORRELATION}): a log of another run?")
     res = float(np.sqrt(np.mean((beta[inside] - model) ** 2)))
-    return Alignment(off, rate, c, r, res, float(inside.mean()), float(np.ptp(tau[inside])))
+    return Alignment(off, rate, c, r, res, float(inside.mean()), float(np.ptp(tau[inside])), mirrored)
 
 
 def _inside(t: np.ndarray, t_log: np.ndarray, margin_s: float) -> np.ndarray:
