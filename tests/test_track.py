@@ -164,6 +164,7 @@ def test_a_video_without_the_markers_is_refused(filmed, tmp_path):
     (["VIDEO", "--log", "LOG", "--scale", "-1"], "--scale -1: metres per pixel"),
     (["VIDEO", "--log", "LOG", "--out", "x.csv"], "the tracked log is Parquet"),
     (["VIDEO", "--log", "LOG", "--markers", "1"], "--markers 1: between 2 and 64"),
+    (["VIDEO", "--log", "LOG", "--fps", "0"], "--fps 0: the rate the video was filmed at, above 0"),
     (["LOG", "--log", "LOG"], "OpenCV cannot read it as a video"),
     (["VIDEO", "--log", "LOG", "--calibrate", "VIDEO", "--board", "2x2"], "--board '2x2': at least 3x3 inner corners"),
     (["VIDEO", "--log", "LOG", "--board", "9x6"], "--board: describes the checkerboard of --calibrate IMAGE, which is not given"),
@@ -402,6 +403,31 @@ def test_a_mirrored_video_is_tracked_with_the_rod_s_own_sense(filmed, tmp_path):
     # the markers are written in the rod's own plane, as seen from the front: the tip on the truth's side
     tip_x = r.markers_m[ok, -1, 0]
     assert np.corrcoef(tip_x, np.sin(truth_angles(d, true_t[ok])).sum(axis=1))[0, 1] > 0.99
+
+
+def test_a_slow_motion_file_is_timed_as_filmed(filmed, tmp_path):
+    """The 240 fps clip written into a file that plays at 30 fps, as a phone's slow-motion video is: it was
+    refused as a log of another run (a clock 8 x slow fits nothing). The factor is found from the swing and said; the clock comes out
+    within a frame as filmed, every edge within 1.5 deg RMS of the truth; --fps 240 gives the same clock."""
+    from rodctl.track import track
+    from rodctl.track.render import write_video
+
+    d = filmed[240]
+    _, size, frames = frames_of(d["video"])
+    video = tmp_path / "slomo.mp4"
+    write_video(video, 30.0, (f for _, f in frames), size)
+    said = []
+    r = track(video, d["log"], None, say=said.append)
+    a, f = r.alignment, d["filming"]
+    assert a.slowdown == 8.0 and r.fps == 240.0 and said[0].startswith("slow motion: the file plays at 30 fps, 8 x"), said
+    assert abs(a.offset_s - f.offset_s) <= 1 / 240 and abs(a.drift_ppm - f.drift_ppm) <= DRIFT_PPM, a
+    ok = np.isfinite(r.theta).all(axis=1)
+    true_t = f.log_time(np.arange(r.frames))
+    assert np.allclose(r.time_s, a.offset_s + a.rate * np.arange(r.frames) / 240.0)
+    rms = np.sqrt(np.mean(wrap_deg(r.theta[ok] - truth_angles(d, true_t[ok])) ** 2, axis=0))
+    assert rms.max() <= 1.5, rms.round(2)
+    told = track(video, d["log"], None, filmed_fps=240.0, say=None).alignment
+    assert told.slowdown == 8.0 and abs(told.offset_s - a.offset_s) < 1e-9, told
 
 
 def test_flickering_light_is_no_repeated_frame(filmed, tmp_path):

@@ -122,7 +122,7 @@ def run_track_command(args) -> int:
 
     try:
         r = track(args.video, args.log, params, markers=args.markers, color=color, hub=hub, scale=args.scale,
-                  view=view, progress=progress)
+                  view=view, filmed_fps=args.fps, progress=progress)
     finally:
         if bar is not None:
             bar.close()
@@ -141,7 +141,7 @@ def run_track_command(args) -> int:
 
     if args.plot:  # the panels' times checked before anything is written
         times = _panel_times(at, r.time_s, np.isfinite(r.theta).all(axis=1))
-    meta = {"video": args.video, "log": args.log, "fps": r.fps, "offset_s": a.offset_s, "drift_ppm": a.drift_ppm,
+    meta = {"video": args.video, "log": args.log, "fps": r.fps, "slowdown": a.slowdown, "offset_s": a.offset_s, "drift_ppm": a.drift_ppm,
             "correlation": a.correlation, "mirrored": a.mirrored, "m_per_px": r.m_per_px, "hub_px": f"{r.hub_px[0]:.2f},{r.hub_px[1]:.2f}",
             "quality": "0 every marker seen, 1 a marker filled in, 2 too few markers, 3 a repeated frame"}
     cols = columns(r.time_s, r.video_time_s, r.theta, r.markers_m, r.quality)
@@ -188,6 +188,9 @@ def register(sub) -> None:
                                                  "still)")
     p.add_argument("--scale", type=float, metavar="M_PER_PX", help="metres per pixel (default: from the rod's "
                                                                     "length)")
+    p.add_argument("--fps", type=float, metavar="F", help="the rate the video was filmed at [frames/s] (default: "
+                                                          "the file's, or a slow-motion file's factor of it, found "
+                                                          "from the swing; say it for a factor the search misses)")
     p.add_argument("--calibrate", metavar="IMAGE", help="a checkerboard held level in the rod's plane: removes the "
                                                         "lens distortion and the tilt, and gives the scale")
     p.add_argument("--board", metavar="COLSxROWS", help="the checkerboard's inner corners (default 9x6)")

@@ -19,7 +19,7 @@ import numpy as np
 
 from rodgains.errors import InputError
 
-from rodctl.track.align import Alignment, align
+from rodctl.track.align import SLOWDOWNS, Alignment, align
 from rodctl.track.compare import error_table, estimate_at, on_branch, settle_time
 from rodctl.track.markers import ColorRange, Detector
 from rodctl.track.shape import (FILLED, GOOD, REPEATED, UNUSABLE, base_tangent, edge_angles, find_hub, place,
@@ -36,13 +36,14 @@ WHOLE_AREA_SHARE = 0.7  # a blob smaller than this share of the median marker is
 MERGED_AREA_SHARE = 1.7  # a blob this much larger than the median marker is two run together (or not a marker)
 REACH_SHARE = 1.2  # a blob farther from the axis than this share of the rod's length is not on the rod
 MIN_MARKERS_PER_FRAME = 2  # median detections per frame below this: not a video of the rod's markers
+MAX_FILMED_FPS = 100_000.0  # a high-speed camera's rate at most [1/s]
 COVERED_WARN = 0.95  # a log covering less of the video's usable frames than this is said to [-]
 
 
 @dataclass
 class Tracked:
     video: str
-    fps: float
+    fps: float  # the rate the video was filmed at (a slow-motion file's times its slowdown) [1/s]
     frames: int
     hub_px: np.ndarray
     m_per_px: float
@@ -202,11 +203,13 @@ def _print_warning(text: str) -> None:
 
 def track(video_path: str | Path, log_path: str | Path, params, *, markers: int | None = None,
           color: ColorRange | None = None, hub: tuple[float, float] | None = None, scale: float | None = None,
-          view=None, progress: Callable[[int, int], None] | None = None,
+          view=None, filmed_fps: float | None = None, progress: Callable[[int, int], None] | None = None,
           warn: Callable[[str], None] | None = _print_warning, say: Callable[[str], None] | None = print) -> Tracked:
     """Track the video against the telemetry log (see the module doc). params: the rod's parameter
     file (its length, and the design's N). markers: on the rod besides the axis's (default N). view:
     a rodctl.track.calibrate.View (lens and tilt removed, scale and level from the checkerboard).
+    filmed_fps: the rate the video was filmed at [1/s] (default: found, the file's or a slow-motion
+    factor of it, rodctl.track.align.SLOWDOWNS).
     Without a view the camera's roll is the constant angle the alignment measures between the
     camera's base angle and the encoder's, and is taken off every angle (Tracked.roll_removed_rad).
     warn, say: called with each warning (default: stderr) and note (default: stdout), one line each,
@@ -228,6 +231,9 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     cpr = counts_per_rev_of(log.meta, lp if lp is not None else p)
     warnings: list[str] = []
 
+    if filmed_fps is not None and not 0 < filmed_fps <= MAX_FILMED_FPS:
+        raise InputError(f"--fps {filmed_fps:g}: the rate the video was filmed at, above 0 and up to "
+                         f"{MAX_FILMED_FPS:g} frames per second")
     video = Video(video_path)
     if hub is not None and not (0 <= hub[0] < video.width and 0 <= hub[1] < video.height):
         raise InputError(f"--hub {hub[0]:g},{hub[1]:g}: outside the video's {video.width}x{video.height} px image")
@@ -267,7 +273,8 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     th_log = np.asarray(data["encoder_count"], float) * 2 * np.pi / cpr
     base = base_tangent(markers_m, length)
     base[ok] = np.unwrap(base[ok])
-    al = align(tau[ok], base[ok], t_log, th_log, video.fps)
+    slowdowns = (filmed_fps / video.fps,) if filmed_fps is not None else SLOWDOWNS
+    al = align(tau[ok], base[ok], t_log, th_log, video.fps, slowdowns)
     if al.covered < COVERED_WARN:
         warnings.append(f"the log covers {100 * al.covered:.0f} % of the video's usable frames ({al.covered_s:.1f} s): "
                         "only those are compared, and the clock drift is measured over them (a log cut short, or "
@@ -291,6 +298,9 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     settled = settle_time(t_log, np.asarray(data["mode_code"]))
     tracked = on_branch(np.where(ok[:, None], theta, np.nan), est)
     errors = error_table(t, tracked, est, settled)
+    if al.slowdown != 1.0 and filmed_fps is None and say is not None:
+        say(f"slow motion: the file plays at {video.fps:g} fps, {al.slowdown:g} x slower than it was filmed "
+            f"({video.fps * al.slowdown:g} fps); --fps gives the rate filmed")
     if al.mirrored and say is not None:
         say("mirrored: the rod turns against the encoder in the picture (filmed from behind the rod's plane, or a "
             "mirrored camera): its x is turned back about the axis")
@@ -300,5 +310,5 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     if warn is not None:
         for w in warnings:
             warn(w)
-    return Tracked(str(video_path), video.fps, F, hub_px, m_per_px, tau, t, tracked, markers_m, quality, al, est,
+    return Tracked(str(video_path), video.fps * al.slowdown, F, hub_px, m_per_px, tau, t, tracked, markers_m, quality, al, est,
                    errors, settled, roll, warnings)

@@ -1,17 +1,18 @@
 """The video's clock against the telemetry log's: offset and rate from the base angle both saw.
 
-    log time = offset + rate * video time
+    log time = offset + rate * video time / slowdown
 
 found by the normalized cross-correlation of the camera's base angle (the first edge) with the
-encoder's, and with its negative: a camera behind the rod's plane (or a selfie camera's mirrored
-picture) sees the rod turn the other way, and a swing's negative correlates with a half-period
-shift of itself (0.98 on the demo), so a mirrored video is found by the sign that fits better,
-not refused as another run's. Then a least-squares fit of offset, rate and a constant angle (the camera's roll and
-the encoder's zero) on the log's samples, interpolated, over the frames the log covers (the video
-may start before the log or end after it). Refused when the best correlation is too weak to trust
-(the video and the log are not of the same run), or when the fit ends at its limits (a drift of
-MAX_DRIFT_PPM, or the offset at the edge of its search): no clock fits the frames' times (frames
-dropped without a gap in their timestamps, or the wrong lag).
+encoder's, for each slow-motion factor (SLOWDOWNS) and for each sign: a camera behind the rod's
+plane (or a selfie camera's mirrored picture) sees the rod turn the other way, and a swing's
+negative correlates with a half-period shift of itself (0.98 on the demo), so the sign and the
+factor are the ones that fit best, not a refusal as another run's. Then a least-squares fit of
+offset, rate and a constant angle (the camera's roll and the encoder's zero) on the log's samples,
+interpolated, over the frames the log covers (the video may start before the log or end after it).
+Refused when the best correlation is too weak to trust (the video and the log are not of the same
+run), or when the fit ends at its limits (a drift of MAX_DRIFT_PPM, or the offset at the edge of
+its search): no clock fits the frames' times (frames dropped without a gap in their timestamps, or
+the wrong lag).
 """
 
 from __future__ import annotations
@@ -26,6 +27,10 @@ MIN_CORRELATION = 0.9  # the fitted base angles must agree this well [-]
 MIN_OVERLAP = 0.5  # share of the video the log must cover at the best lag [-]
 MIN_SWING_DEG = 5.0  # the base must move this much in the video to time it
 MAX_DRIFT_PPM = 5000.0  # camera clocks are good to a few hundred ppm; beyond this the fit is lost
+# A slow-motion file plays slower than it was filmed: a phone films at 60 to 960 fps and writes a file that
+# plays at 24, 25, 30 or 60. Its container's clock runs this many times slower than the log's [-]; each is
+# tried (1 first) and the best correlation wins: a swing slowed by the wrong factor has the wrong period.
+SLOWDOWNS = tuple(sorted({c / p for c in (60, 120, 240, 480, 960) for p in (24, 25, 30, 60) if c > p} | {1.0}))
 # Of two lags that fit alike, the one the log covers more of wins, by this much correlation per share
 # of the video outside the log [-]. Small, because a video started before the log (or stopped after
 # it) is right to overlap it partly: r * overlap (0.97 at full overlap beat 0.9999 at 94 %) chose
@@ -45,13 +50,15 @@ class Alignment:
     covered: float = 1.0  # share of the usable frames the log covers: the only ones compared [-]
     covered_s: float = 0.0  # the video time they span, over which the drift is measured [s]
     mirrored: bool = False  # the camera sees the rod turn against the encoder: its angles were negated
+    slowdown: float = 1.0  # the video's seconds per second filmed: a slow-motion file's factor [-]
 
     @property
     def drift_ppm(self) -> float:
         return (self.rate - 1.0) * 1e6
 
     def log_time(self, video_t: np.ndarray) -> np.ndarray:
-        return self.offset_s + self.rate * np.asarray(video_t)
+        """The log's time [s] of the video's times video_t [s, the file's clock]."""
+        return self.offset_s + self.rate * np.asarray(video_t) / self.slowdown
 
 
 def _coarse(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarray, dt: float) -> tuple[float, float]:
@@ -82,10 +89,12 @@ def _coarse(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.nda
     return grid[0] + lags[best] * dt - tau[0], float(r[best])
 
 
-def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarray, fps: float) -> Alignment:
-    """tau: video times of the usable frames [s]; beta: the rod's base angle in them [rad] (unwrapped;
-    rodctl.track.shape.base_tangent); t_log, th_log: the log's time [s] and encoder angle [rad]. A
-    mirrored video's alignment is of -beta (Alignment.mirrored)."""
+def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarray, fps: float,
+          slowdowns: tuple[float, ...] = SLOWDOWNS) -> Alignment:
+    """tau: video times of the usable frames [s, the file's clock]; beta: the rod's base angle in them
+    [rad] (unwrapped; rodctl.track.shape.base_tangent); t_log, th_log: the log's time [s] and encoder
+    angle [rad]; fps: the file's frame rate [1/s]; slowdowns: the slow-motion factors to try (the
+    file's seconds per second filmed). A mirrored video's alignment is of -beta (Alignment.mirrored)."""
     from scipy.optimize import least_squares
 
     if len(tau) < 20:
@@ -93,11 +102,15 @@ def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarr
     if np.ptp(beta) < np.radians(MIN_SWING_DEG):
         raise InputError(f"the rod's base moves {np.degrees(np.ptp(beta)):.1f} deg in the video: too little to "
                          "align it with the log (swing the rod by hand at the start of the run)")
-    offset0, r0 = _coarse(tau, beta, t_log, th_log, 1.0 / fps)
-    offset_m, r_m = _coarse(tau, -beta, t_log, th_log, 1.0 / fps)
-    mirrored = r_m > r0
-    if mirrored:
-        beta, offset0, r0 = -beta, offset_m, r_m
+    r0, offset0, slowdown, sign = -np.inf, 0.0, 1.0, 1.0
+    for s in slowdowns:  # in the order given: of equal fits the first (1, unmirrored) is kept
+        for sg in (1.0, -1.0):
+            off, r = _coarse(tau / s, sg * beta, t_log, th_log, 1.0 / (fps * s))
+            if r > r0:
+                r0, offset0, slowdown, sign = r, off, s, sg
+    mirrored = sign < 0
+    # from here on the time filmed, its frame rate, and the rod's own sense
+    tau, fps, beta = tau / slowdown, fps * slowdown, sign * beta
     if r0 < MIN_CORRELATION:
         raise InputError(f"the video's base angle does not follow the log's (best correlation {r0:.2f} < "
                          f"{MIN_CORRELATION}): a log of another run?")
@@ -127,7 +140,7 @@ def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarr
         raise InputError(f"the video's base angle does not follow the log's (correlation {r:.2f} < "
                          f"{MIN_CORRELATION}): a log of another run?")
     res = float(np.sqrt(np.mean((beta[inside] - model) ** 2)))
-    return Alignment(off, rate, c, r, res, float(inside.mean()), float(np.ptp(tau[inside])), mirrored)
+    return Alignment(off, rate, c, r, res, float(inside.mean()), float(np.ptp(tau[inside])), mirrored, slowdown)
 
 
 def _inside(t: np.ndarray, t_log: np.ndarray, margin_s: float) -> np.ndarray:
