@@ -64,9 +64,12 @@ def harness(tmp_path_factory):
     return exe
 
 
-def run_board(exe, seconds=1.0, timer_ok=True, fail_writes=(-1, 0), host: bytes = b""):
+def run_board(exe, seconds=1.0, timer_ok=True, fail_writes=(-1, 0), host: bytes = b"", upload_at_s=-1.0,
+              reset_cause=(0x82, 0)):
+    """reset_cause: RCM_SRS0, RCM_SRS1 at start-up (default a power-on's: POR and LVD)."""
     r = subprocess.run([str(exe), str(seconds), "1" if timer_ok else "0", f"{fail_writes[0]},{fail_writes[1]}",
-                        host.hex()], capture_output=True, text=True, timeout=120)
+                        host.hex() or "-", str(upload_at_s), f"{reset_cause[0]:x},{reset_cause[1]:x}"],
+                       capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()
     out = dict(ln.split("=", 1) for ln in lines[1:])
@@ -112,3 +115,36 @@ def test_watchdog_is_refreshed_at_its_pace(harness):
     assert t[0] >= 5
     gaps = [b - a for a, b in zip(t, t[1:])]
     assert min(gaps) >= 10 and max(gaps) <= 20  # far inside the 100 ms timeout
+
+
+def test_an_upload_request_turns_the_driver_off_on_the_next_step(harness):
+    """Swinging up, the host sets the port to 134 baud (an upload asks for the bootloader; 15 ms later the
+    CPU halts where it stands, PWM and nEN held): nEN goes high within one control period and stays high,
+    and the board says why (FAULT, reason UPLOAD)."""
+    host = P.encode(P.Arm(P.ArmMode.SWING_UP), 1)
+    frames, _, out = run_board(harness, seconds=0.4, host=host, upload_at_s=0.2)
+    upload, last_low = float(out["upload_ms"]), float(out["nen_low_last_ms"])
+    assert upload - 1.0 <= last_low <= upload + 1.0, out  # driving until then, off within one step
+    tlm = [f.msg for f in frames if f.type == P.MsgType.TELEMETRY]
+    assert tlm[-1].mode == P.Mode.FAULT and tlm[-1].reason == P.Reason.UPLOAD
+    assert not tlm[-1].flags & P.TelemetryFlag.DRIVER_ENABLED
+
+
+@pytest.mark.parametrize("cause, held", [((0x20, 0), True), ((0, 0x02), True), ((0x40, 0), False), ((0x82, 0), False)],
+                         ids=["watchdog", "lockup", "pin-reset", "power-on"])
+def test_a_restart_from_the_watchdog_or_a_lockup_refuses_to_arm(harness, cause, held):
+    """After the watchdog or a core lockup the count's zero is wherever the run left the rod (upright, mid-swing):
+    the board holds FAULT, reason RESET, refuses ARM and CLEAR_FAULT, and never enables the driver. After a
+    power-on, a pin reset or an upload the rod hung with the driver off, and it arms."""
+    host = P.encode(P.ClearFault(), 1) + P.encode(P.Arm(P.ArmMode.SWING_UP), 2)
+    frames, _, out = run_board(harness, seconds=0.3, host=host, reset_cause=cause)
+    acks = {f.msg.command_seq: f.msg for f in frames if f.type == P.MsgType.ACK}
+    tlm = [f.msg for f in frames if f.type == P.MsgType.TELEMETRY]
+    if held:
+        hellos = [f.msg for f in frames if f.type == P.MsgType.HELLO]
+        assert hellos and all((h.mode, h.reason) == (P.Mode.FAULT, P.Reason.RESET) for h in hellos)
+        assert acks[2].result == P.AckResult.BAD_STATE and out["nen_low_ever"] == "0"
+        assert all(t.mode == P.Mode.FAULT and t.reason == P.Reason.RESET for t in tlm)
+    else:
+        assert acks[2].result == P.AckResult.OK and out["nen_low_ever"] == "1"
+        assert tlm[-1].mode == P.Mode.SWING_UP

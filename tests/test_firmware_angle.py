@@ -196,6 +196,28 @@ def test_save_rig_stores_the_settings_as_they_were_when_it_arrived():
         dev.close()
 
 
+def test_save_rig_while_armed_is_refused_and_writes_nothing():
+    """SAVE_RIG while swinging up: BAD_STATE, the EEPROM untouched (a write holds the board's main loop for
+    milliseconds, heartbeats uncounted, nearer the watchdog); disarmed, the same command stores the record."""
+    from rodctl.sim.device import VirtualDevice
+
+    dev = VirtualDevice.from_options()
+    try:
+        dev.step()
+        dev.write(P.encode(P.Arm(P.ArmMode.SWING_UP), 1) + P.encode(P.SaveRig(), 2))
+        dev.step()
+        dev.step()
+        assert len(dev.eeprom) == 0  # nothing written while armed
+        dev.write(P.encode(P.Disarm(), 3) + P.encode(P.SaveRig(), 4))
+        dev.step()
+        dev.step()
+        acks = {f.msg.command_seq: f.msg.result for f in P.Decoder().feed(dev.read()) if f.type == P.MsgType.ACK}
+        assert acks == {1: P.AckResult.OK, 2: P.AckResult.BAD_STATE, 3: P.AckResult.OK, 4: P.AckResult.OK}
+        assert len(dev.eeprom) == 16  # written by the disarmed SAVE_RIG
+    finally:
+        dev.close()
+
+
 def test_hello_flags_stored_only_while_the_settings_in_use_are_the_stored_ones(tmp_path):
     """STORED means the settings survive a power cycle as they are: a SET after SAVE_RIG (or after a
     power-on from storage) clears it, setting the stored value back raises it again."""

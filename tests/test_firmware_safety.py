@@ -145,7 +145,7 @@ def test_nfault_while_disarmed_latches_fault_so_arming_is_refused():
     assert dev.mode == MODE["FAULT"] and dev.enable == 0
 
 
-@pytest.mark.parametrize("timeout", [None, 0.2, 0.05])
+@pytest.mark.parametrize("timeout", [None, 0.2, 2.0])
 def test_heartbeat_timeout_trips_at_the_configured_time(timeout):
     dev = Dev()
     dev.step(490)

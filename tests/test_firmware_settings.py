@@ -39,7 +39,7 @@ CASES = {
     "CATCH_ANGLE": ([TWO_DEG, 0.5, 1.04, f32(math.radians(60.0))],
                     [0.0, 0.03, 1e-40, -0.2, 1.05, 1.2, NAN, INF]),
     "TELEMETRY_DECIMATION": ([1.0, 7.0, 1000.0], [0.0, 0.5, 2.5, 1001.0, -1.0, NAN, INF]),
-    "HEARTBEAT_TIMEOUT": ([f32(0.05), 1.0, 10.0], [0.049, 10.01, 0.0, -1.0, NAN, INF]),
+    "HEARTBEAT_TIMEOUT": ([f32(0.2), 1.0, 10.0], [0.199, 0.05, 10.01, 0.0, -1.0, NAN, INF]),
 }
 
 

@@ -9,7 +9,8 @@
  *   0 DISARMED  1 BALANCE  2 SWING_UP  3 FAULT  4 CATCH  5 IDENTIFY
  * Reason codes (rod_sil_reason, rod_dev_reason):
  *   0 NONE  1 HOST  2 ANGLE_LIMIT  3 SPEED_LIMIT  4 DRIVER_FAULT  5 HEARTBEAT  6 NON_FINITE
- *   7 OVERRUN  8 NO_TIMER  9 RUNAWAY  (the protocol's codes, firmware/protocol/rodlink.toml)
+ *   7 OVERRUN  8 NO_TIMER  9 RUNAWAY  10 IMU  11 UPLOAD  12 RESET  (the protocol's codes,
+ *   firmware/protocol/rodlink.toml)
  * Angles in rad with 0 hanging and pi upright (multi-turn), rates in rad/s, torque in N m at
  * the output shaft, duty signed in [-1, 1].
  */

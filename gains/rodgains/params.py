@@ -220,7 +220,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "torque_limit": Key(float, "N m", _positive),
         "angle_limit_deg": Key(float, "deg", _above_upto(0, 180)),
         "speed_limit": Key(float, "rad/s", _positive),
-        "heartbeat_timeout": Key(float, "s", _between(0.05, 10.0)),
+        "heartbeat_timeout": Key(float, "s", _between(0.2, 10.0)),
     },
     # Monte Carlo draws of the simulated plant for `rodctl robustness` and `rodctl tune`
     # (host/rodctl/robust/uncertainty.py). The design never sees them. *_rel: uniform within

@@ -110,6 +110,11 @@ static uint8_t apply_command(rod_device_t *dev, const rod_msg_command_t *cmd)
         dev->hello_wanted = true;
         return ROD_ACK_OK;
     case ROD_MSG_SAVE_RIG:
+        if (rod_mode_is_armed(c->mode)) {
+            /* The EEPROM emulation holds loop() for milliseconds a write (longer when it compacts),
+             * which an armed run spends without heartbeats counted and nearer the watchdog. */
+            return ROD_ACK_BAD_STATE;
+        }
         /* The settings as they are now: a SET after this one must not reach the stored record,
          * and the main loop must not encode a num / den pair this interrupt is changing. */
         rod_rig_encode(&c->settings.rig, dev->save_bytes);

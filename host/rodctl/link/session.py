@@ -52,8 +52,14 @@ REASON_TEXT = {
     P.Reason.OVERRUN: "control step overrun",
     P.Reason.NO_TIMER: "the board's control timer did not start (reset the board)",
     P.Reason.RUNAWAY: "runaway: the base accelerated against the torque (a reversed encoder or motor: run `rodctl check`)",
+    P.Reason.IMU: "the tip IMU was lost (no sample, a stuck one, or one at full scale)",
+    P.Reason.UPLOAD: "restarting for an upload (the driver is off until the new firmware runs)",
+    P.Reason.RESET: "the board restarted from its watchdog, not from power-on: its encoder zero is where the rod "
+                    "was then (power it off and on with the rod hanging still)",
 }
 
+# the board's own faults (rod_device_board_fault): CLEAR_FAULT cannot leave them, only a restart
+HELD_UNTIL_RESET = (P.Reason.NO_TIMER, P.Reason.UPLOAD, P.Reason.RESET)
 ARMED_MODES = (P.Mode.BALANCE, P.Mode.SWING_UP, P.Mode.CATCH, P.Mode.IDENTIFY)
 
 
@@ -74,6 +80,8 @@ def reason_text(reason) -> str:
 def mode_text(mode, reason) -> str:
     m = name_of(P.Mode, mode)
     if int(mode) == P.Mode.FAULT:
+        if int(reason) in HELD_UNTIL_RESET:  # clear-fault cannot leave these: the text says what does
+            return f"{m} ({reason_text(reason)})"
         return f"{m} ({reason_text(reason)}: run clear-fault)"
     if int(reason) != P.Reason.NONE:
         return f"{m} (last: {reason_text(reason)})"

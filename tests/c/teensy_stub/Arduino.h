@@ -29,6 +29,7 @@ void analogWriteFrequency(uint8_t pin, float frequency);
 void attachInterrupt(uint8_t pin, void (*function)(void), int mode);
 uint32_t micros(void);
 uint32_t millis(void);
+void delayMicroseconds(uint32_t usec);
 #define __disable_irq() __asm__ volatile("" ::: "memory")
 #define __enable_irq() __asm__ volatile("" ::: "memory")
 
@@ -85,6 +86,15 @@ extern volatile uint16_t stub_reg16[64];
 #define CORE_PIN7_DDRREG STUB_REG32(0x400FF0D4u)
 #define CORE_PIN7_CONFIG STUB_REG32(0x4004C008u)
 
+// the reset's cause (kinetis.h: 8-bit registers at 0x4007F000 / 1; here two stand-in slots no other
+// register of this file shares)
+#define RCM_SRS0 STUB_REG32(0x4007F200u)
+#define RCM_SRS0_POR ((uint8_t)0x80)
+#define RCM_SRS0_PIN ((uint8_t)0x40)
+#define RCM_SRS0_WDOG ((uint8_t)0x20)
+#define RCM_SRS1 STUB_REG32(0x4007F204u)
+#define RCM_SRS1_LOCKUP ((uint8_t)0x02)
+
 #define WDOG_STCTRLH STUB_REG16(0x40052000u)
 #define WDOG_STCTRLH_WDOGEN (uint16_t)0x0001
 #define WDOG_STCTRLH_ALLOWUPDATE (uint16_t)0x0010
@@ -110,6 +120,7 @@ class usb_serial_class {
     size_t readBytes(char *buffer, size_t length);
     int availableForWrite();
     size_t write(const uint8_t *buffer, size_t size);
+    uint32_t baud(void);  // the line coding's rate the host set (usb_cdc_line_coding[0]): 134 asks for a reboot
 };
 extern usb_serial_class Serial;
 #endif

@@ -2,8 +2,10 @@
 // in this folder: simulated time, a USB port that records what the board writes (and can fail
 // chosen writes), a timer that can refuse to start, and a recording watchdog. Used by
 // tests/test_board_layer.py:
-//   board_harness SECONDS TIMER_OK(0|1) FAIL_WRITES(first,count) HOST_HEX
+//   board_harness SECONDS TIMER_OK(0|1) FAIL_WRITES(first,count) HOST_HEX [UPLOAD_AT_S [SRS0,SRS1]]
 // FAIL_WRITES counts the writes of frame data (more than one byte); those write half their bytes.
+// UPLOAD_AT_S: when the host sets the port to 134 baud (an upload's reboot request; < 0 never).
+// SRS0,SRS1: the reset-cause registers the board starts with (default a power-on's, 0x82,0).
 // Prints `serial HEX` (every byte the board wrote), then key=value lines.
 #include <stdio.h>
 #include <stdlib.h>
@@ -30,6 +32,8 @@ static long write_calls, fail_first = -1, fail_count;
 static std::vector<uint8_t> out_bytes, host_bytes;
 static size_t host_pos;
 static std::vector<uint64_t> refresh_ms;
+static uint32_t line_baud = 9600;
+static uint64_t nen_low_last_us;  // the last time nEN was seen low
 static uint16_t last_refresh_value;
 
 // The EEPROM emulation: erased (0xFF) at power-on, as a new Teensy's
@@ -59,6 +63,7 @@ void analogWriteFrequency(uint8_t, float) {}
 void attachInterrupt(uint8_t, void (*)(void), int) {}
 uint32_t micros(void) { return (uint32_t)now_us; }
 uint32_t millis(void) { return (uint32_t)(now_us / 1000u); }
+void delayMicroseconds(uint32_t usec) { now_us += usec; }
 
 stub_refresh_register &stub_refresh_register::operator=(uint16_t value)
 {
@@ -89,6 +94,7 @@ size_t usb_serial_class::readBytes(char *buffer, size_t length)
     return n;
 }
 int usb_serial_class::availableForWrite() { return 64; }
+uint32_t usb_serial_class::baud(void) { return line_baud; }
 size_t usb_serial_class::write(const uint8_t *buffer, size_t size)
 {
     long call = size > 1 ? write_calls++ : -2;  // frame data, not a lone delimiter
@@ -121,6 +127,13 @@ int main(int argc, char **argv)
             host_bytes.push_back((uint8_t)v);
         }
     }
+    double upload_at_s = argc > 5 ? atof(argv[5]) : -1.0;
+    unsigned srs0 = 0x82, srs1 = 0;  // POR and LVD: a power-on
+    if (argc > 6) {
+        sscanf(argv[6], "%x,%x", &srs0, &srs1);
+    }
+    RCM_SRS0 = srs0;
+    RCM_SRS1 = srs1;
     // the core's ResetHandler calls the board's early hook before anything else (board_failsafe.cpp)
     startup_early_hook();
     early_driver_off = (CORE_PIN7_PORTSET & CORE_PIN7_BITMASK) && (CORE_PIN7_DDRREG & CORE_PIN7_BITMASK)
@@ -132,14 +145,19 @@ int main(int argc, char **argv)
     setup();
     uint64_t next_isr = now_us + 1000u;
     uint64_t end = now_us + (uint64_t)(seconds * 1e6);
+    uint64_t upload_us = upload_at_s >= 0 ? now_us + (uint64_t)(upload_at_s * 1e6) : UINT64_MAX;
     while (now_us < end) {
         now_us += 50u;
+        if (now_us >= upload_us) {
+            line_baud = 134;
+        }
         if (timer_isr != nullptr && now_us >= next_isr) {
             next_isr += 1000u;
             timer_isr();
         }
         if (pins[7] == LOW) {
             nen_low_ever = true;
+            nen_low_last_us = now_us;
         }
         loop();
     }
@@ -148,8 +166,9 @@ int main(int argc, char **argv)
         printf("%02x", b);
     }
     printf("\nnen_low_ever=%d\nled_toggles=%u\nwdog_presc=%u\nwdog_stctrlh=%u\nearly_driver_off=%d\n"
-           "early_wdog_stctrlh=%u\nrefresh_ms=", nen_low_ever ? 1 : 0, led_toggles, (unsigned)WDOG_PRESC,
-           (unsigned)WDOG_STCTRLH, early_driver_off ? 1 : 0, early_wdog);
+           "early_wdog_stctrlh=%u\nnen_low_last_ms=%.3f\nupload_ms=%.3f\nrefresh_ms=", nen_low_ever ? 1 : 0, led_toggles, (unsigned)WDOG_PRESC,
+           (unsigned)WDOG_STCTRLH, early_driver_off ? 1 : 0, early_wdog, nen_low_last_us / 1e3,
+           upload_us == UINT64_MAX ? -1.0 : upload_us / 1e3);
     for (size_t i = 0; i < refresh_ms.size(); i++) {
         printf(i ? ",%llu" : "%llu", (unsigned long long)refresh_ms[i]);
     }

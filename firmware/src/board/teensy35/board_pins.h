@@ -48,6 +48,8 @@
 // Encoder input filters: a phase edge must be stable 4 x FVAL bus clocks (K64 RM, FTMx_FILTER):
 // 8 -> 32 clocks = 0.53 us at 60 MHz, far below the 120 us between counts at no-load speed.
 #define BOARD_ENCODER_FILTER 8
+// Time the filters take to settle on the lines' levels at start-up, before the count is zeroed [us]
+#define BOARD_ENCODER_SETTLE_US 5
 
 // NVIC priorities (lower = more urgent; the K64 implements the top 4 bits). USB runs at 112
 // (usb_dev.c usb_init), IntervalTimer defaults to 128, SysTick at 32 (mk20dx128.c).

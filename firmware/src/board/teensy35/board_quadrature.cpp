@@ -24,11 +24,16 @@ void board_quadrature_begin()
     // Channel 0 filters phase A, channel 1 phase B; QUADMODE left 0: phase A/B encoding.
     FTM1_FILTER = FTM_FILTER_CH0FVAL(BOARD_ENCODER_FILTER) | FTM_FILTER_CH1FVAL(BOARD_ENCODER_FILTER);
     FTM1_QDCTRL = FTM_QDCTRL_PHAFLTREN | FTM_QDCTRL_PHBFLTREN | FTM_QDCTRL_QUADEN;
-    FTM1_CNT = 0;  // any write loads CNTIN
-    FTM1_SC = FTM_SC_CLKS(1) | FTM_SC_PS(0);  // system clock for the filters, no prescaler
     // ALT7 = FTM1_QD_PHA / FTM1_QD_PHB; pull-ups keep the lines defined if the encoder is unplugged.
+    // Muxed before the counter runs: switching a pin to the decoder moves its input to the
+    // encoder's level, an edge the filter would pass a few clocks after the count below was read.
     CORE_PIN3_CONFIG = PORT_PCR_MUX(7) | PORT_PCR_PE | PORT_PCR_PS;
     CORE_PIN4_CONFIG = PORT_PCR_MUX(7) | PORT_PCR_PE | PORT_PCR_PS;
+    FTM1_SC = FTM_SC_CLKS(1) | FTM_SC_PS(0);  // system clock for the filters, no prescaler
+    // The filters start from low and reach the lines' levels within FVAL x 4 clocks (1 us at most):
+    // whatever they counted on the way is not motion. Zero after that (any write loads CNTIN).
+    delayMicroseconds(BOARD_ENCODER_SETTLE_US);
+    FTM1_CNT = 0;
     last_hw = (uint16_t)FTM1_CNT;
     extended = 0;
 }

@@ -12,9 +12,10 @@
 // 100 ms watchdog.
 //
 // Teensyduino API checked in PaulStoffregen/cores teensy3/: IntervalTimer.h (priority(),
-// begin(f, unsigned us)), usb_serial.h (available, readBytes, availableForWrite, write),
-// usb_serial.c (write_buffer_free semantics), pins_teensy.c (analogWrite*, micros is ISR-safe),
-// core_pins.h (digitalWriteFast, CORE_PINn_*), kinetis.h (NVIC_SET_PRIORITY, IRQ_PORTD).
+// begin(f, unsigned us)), usb_serial.h (available, readBytes, availableForWrite, write, baud),
+// usb_serial.c (write_buffer_free semantics), usb_dev.c (134 baud: reboot), pins_teensy.c
+// (analogWrite*, micros is ISR-safe), core_pins.h (digitalWriteFast, delayMicroseconds,
+// CORE_PINn_*), kinetis.h (NVIC_SET_PRIORITY, IRQ_PORTD, RCM_SRS0/1).
 #include "board_framework.h"
 
 #include <math.h>
@@ -79,9 +80,22 @@ static void apply(const rod_outputs_t &out)
     }
 }
 
+// The host asks for the bootloader by setting the port to 134 baud (Teensy Loader, PlatformIO's
+// upload); 15 ms later the USB interrupt halts the CPU with a breakpoint (usb_dev.c
+// usb_reboot_timer), where the PWM and nEN would hold their levels, and the watchdog with them
+// (it does not run while the core is halted), until the bootloader resets the chip. So the driver
+// goes off on the first step that sees the request.
+static bool upload_requested()
+{
+    return Serial.baud() == 134u;  // one 32-bit word the USB interrupt writes: a whole read
+}
+
 static void control_step()
 {
     uint32_t start = ARM_DWT_CYCCNT;
+    if (upload_requested()) {
+        rod_device_board_fault(&device, ROD_REASON_UPLOAD);  // this step ends with the outputs off
+    }
     rod_inputs_t in;
     in.now_us = micros();
     in.encoder_count = board_quadrature_count();
@@ -272,6 +286,13 @@ void setup()
         // nothing (or nothing readable) stored
         rod_device_load_rig(&device, stored, sizeof stored,
                             rod_rig_defaults((int8_t)BOARD_ENCODER_SIGN, (int8_t)BOARD_MOTOR_DIR_SIGN));
+    }
+
+    // The encoder's zero is the count at start-up, taken as hanging. After a power-on, a pin reset or
+    // an upload the rod hangs, the driver having been off; after the watchdog or a lockup it is
+    // wherever the run left it (upright, mid-swing), and every angle would be off by that much.
+    if ((RCM_SRS0 & RCM_SRS0_WDOG) || (RCM_SRS1 & RCM_SRS1_LOCKUP)) {
+        rod_device_board_fault(&device, ROD_REASON_RESET);
     }
 
     control_timer.priority(BOARD_CONTROL_IRQ_PRIORITY);  // before begin(): begin applies it
