@@ -166,9 +166,9 @@ int main(int argc, char **argv)
         printf("%02x", b);
     }
     printf("\nnen_low_ever=%d\nled_toggles=%u\nwdog_presc=%u\nwdog_stctrlh=%u\nearly_driver_off=%d\n"
-           "early_wdog_stctrlh=%u\nnen_low_last_ms=%.3f\nupload_ms=%.3f\nrefresh_ms=", nen_low_ever ? 1 : 0, led_toggles, (unsigned)WDOG_PRESC,
+           "early_wdog_stctrlh=%u\nnen_low_last_ms=%.3f\nupload_ms=%.3f\nwdog_timeout_ms=%u\nrefresh_ms=", nen_low_ever ? 1 : 0, led_toggles, (unsigned)WDOG_PRESC,
            (unsigned)WDOG_STCTRLH, early_driver_off ? 1 : 0, early_wdog, nen_low_last_us / 1e3,
-           upload_us == UINT64_MAX ? -1.0 : upload_us / 1e3);
+           upload_us == UINT64_MAX ? -1.0 : upload_us / 1e3, ((unsigned)WDOG_TOVALH << 16) | WDOG_TOVALL);
     for (size_t i = 0; i < refresh_ms.size(); i++) {
         printf(i ? ",%llu" : "%llu", (unsigned long long)refresh_ms[i]);
     }

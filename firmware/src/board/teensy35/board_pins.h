@@ -56,8 +56,14 @@
 #define BOARD_CONTROL_IRQ_PRIORITY 64  // the control step preempts USB
 #define BOARD_NFAULT_IRQ_PRIORITY 32   // a driver fault preempts the control step
 
-// Kinetis watchdog: reset when the main loop stops, or the control interrupt stops running.
+// Kinetis watchdog: reset when the main loop stops, or the control interrupt stops running. A
+// healthy loop() can already be held 70 ms by one USB write, plus the 10 ms refresh pace and an
+// EEPROM write (disarmed), on a clock (the LPO) that is itself a few per cent off; and a restart
+// from the watchdog holds the board in FAULT until a power-on (RESET: its zero is lost), so a false
+// one must not happen. A stopped control interrupt, which leaves the driver as it was, is what the
+// margin costs: the fault handlers turn the driver off at once (board_failsafe.cpp), a hung step
+// within this timeout.
 #define BOARD_WATCHDOG_ENABLED 1
-#define BOARD_WATCHDOG_TIMEOUT_MS 100
+#define BOARD_WATCHDOG_TIMEOUT_MS 250
 
 #endif  // BOARD_PINS_H

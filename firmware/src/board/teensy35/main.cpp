@@ -8,8 +8,8 @@
 // queue), and a frame that finds no room at all is dropped and counted. One wait remains: the USB
 // start-of-frame interrupt can take the packet between availableForWrite() and write()
 // (usb_serial.c's own TODO), and write() then waits up to TX_TIMEOUT_MSEC (70 ms) once. Control
-// runs on in its interrupt meanwhile, and 70 ms plus the 10 ms refresh period stays inside the
-// 100 ms watchdog.
+// runs on in its interrupt meanwhile, and 70 ms plus the 10 ms refresh period stays well inside the
+// 250 ms watchdog (board_pins.h).
 //
 // Teensyduino API checked in PaulStoffregen/cores teensy3/: IntervalTimer.h (priority(),
 // begin(f, unsigned us)), usb_serial.h (available, readBytes, availableForWrite, write, baud),
