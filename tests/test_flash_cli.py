@@ -160,3 +160,36 @@ def test_outside_a_clone_build_and_flash_name_what_they_need(monkeypatch, capsys
         assert cli.main(command) == 2
         line = _one_line(capsys)
         assert "needs a clone of this repository" in line and "pip install -e ." in line
+
+
+class _Port:
+    def __init__(self, device, vid=0x16C0, pid=0x0483):
+        self.device, self.vid, self.pid, self.serial_number = device, vid, pid, None
+
+
+@pytest.mark.parametrize("back_after", [3, None], ids=["back", "not-back"])
+def test_flash_waits_for_the_board_to_come_back_on_usb(tmp_path, monkeypatch, capsys, back_after):
+    """PlatformIO returns while the Teensy restarts: `rodctl status` at once found no Teensy. flash now says
+    where the board is back (listed again after a few polls), or, when it does not come back, what to do."""
+    from serial.tools import list_ports
+
+    from rodctl.cli import flash
+
+    args_file = _fake_pio(tmp_path, monkeypatch, output="SUCCESS\n", platform_installed=True)
+    _offline(monkeypatch)
+    polls = []
+
+    def comports():
+        polls.append(1)
+        return [_Port("/dev/ttyACM0")] if back_after is not None and len(polls) > back_after else []
+
+    monkeypatch.setattr(list_ports, "comports", comports)
+    monkeypatch.setattr(flash, "BACK_ON_USB_S", 30.0 if back_after is not None else 0.5)  # back: within 1 s
+    assert cli.main(["flash", "--upload-port", "/dev/ttyACM0", "--project-dir", str(_project(tmp_path))]) == 0
+    assert args_file.read_text().split() == ["run", "-e", "teensy35", "-t", "upload", "--upload-port", "/dev/ttyACM0"]
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    if back_after is not None:
+        assert last == "flashed: the board is back on /dev/ttyACM0, DISARMED; check it with `rodctl status`"
+        assert len(polls) == back_after + 1
+    else:
+        assert last.startswith("flashed, but the board is not back on USB after 0.5 s: unplug it")

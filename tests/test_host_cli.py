@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from host_tools import rodctl_env, run_rodctl
+from rodgains.errors import UserError
 from rodgains.params import load_params
 
 from rodctl import cli
@@ -82,6 +83,56 @@ def test_a_port_without_the_firmware_is_named_as_such():
         os.close(slave)
     assert r.returncode == 1
     assert "no rodlink frames within 3 s: is the board running the rod firmware" in _one_error_line(r)
+
+
+@pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
+def test_a_board_of_another_protocol_version_is_named_as_such():
+    """Whole, CRC-valid frames of another rodlink version: the board runs the rod firmware, of another checkout.
+    It was told "is the board running the rod firmware?"; now the versions are named, and what to do."""
+    import threading
+    import tty
+
+    from rodctl.link.protocol import cobs_encode, crc16
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    stop = threading.Event()
+
+    def board():  # a HELLO-sized frame of version + 1, every 20 ms
+        body = bytes([P.VERSION + 1, int(P.MsgType.HELLO)]) + bytes(40)
+        frame = cobs_encode(body + crc16(body).to_bytes(2, "little")) + b"\0"
+        while not stop.wait(0.02):
+            os.write(master, frame)
+
+    t = threading.Thread(target=board, daemon=True)
+    t.start()
+    try:
+        r = run_rodctl("status", "--port", os.ttyname(slave), timeout=60)
+    finally:
+        stop.set()
+        t.join(timeout=5)
+        os.close(master)
+        os.close(slave)
+    assert r.returncode == 1
+    line = _one_error_line(r)
+    assert f"speaks another rodlink version than this rodctl (v{P.VERSION}" in line and "rodctl flash" in line, line
+
+
+@pytest.mark.parametrize("err, says", [(13, "permission denied (on Linux: `sudo usermod -aG dialout $USER`"),
+                                       (16, "is in use by another program")], ids=["EACCES", "EBUSY"])
+def test_a_port_the_user_may_not_open_says_how_to_fix_it(monkeypatch, err, says):
+    """pyserial's own text for these is the bare OS error; the first one is every new Linux user's first run."""
+    import serial
+
+    from rodctl.link.session import open_serial
+
+    def refuse(port, **kw):
+        raise serial.SerialException(err, f"could not open port {port}: [Errno {err}] {os.strerror(err)}: '{port}'")
+
+    monkeypatch.setattr(serial, "Serial", refuse)
+    with pytest.raises(UserError) as e:
+        open_serial("/dev/ttyACM7")
+    assert says in str(e.value) and "\n" not in str(e.value), e.value
 
 
 # ---- build / flash ------------------------------------------------------------------------------

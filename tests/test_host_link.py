@@ -226,6 +226,44 @@ def test_silent_host_faults_and_arm_in_fault_is_refused_naming_clear_fault(sessi
     assert session.arm(P.ArmMode.BALANCE).mode == P.Mode.CATCH
 
 
+def test_a_holder_that_stops_looking_at_the_link_lets_the_board_disarm_itself():
+    """A command's session (liveness_s) heartbeats only while the code holding it calls check(): a main thread
+    stuck elsewhere (writing to a terminal paused with Ctrl-S kept `rodctl arm` armed past its duration, and
+    Ctrl-C could not reach the DISARM) leaves the board to trip HEARTBEAT. Looking at the link keeps it armed."""
+    from rodctl.cli.common import LIVENESS_S
+
+    with Session("sim://", liveness_s=LIVENESS_S) as s:
+        s.arm(P.ArmMode.BALANCE)
+        end = time.monotonic() + 4 * LIVENESS_S
+        while time.monotonic() < end:  # looking: the heartbeats go on
+            s.check()
+            time.sleep(0.05)
+        assert s.telemetry.mode == P.Mode.CATCH and s.telemetry.flags & P.TelemetryFlag.HEARTBEAT_OK
+        assert until(lambda: s.telemetry.mode == P.Mode.FAULT, timeout=30)  # not looking (no check())
+        assert s.telemetry.reason == P.Reason.HEARTBEAT
+
+
+def test_an_attach_disarms_before_it_writes_its_last_line():
+    """The end of `rodctl log/arm` writes to the terminal (the status line's newline), which blocks while the
+    terminal is paused: the DISARM goes out first, so a blocked write cannot keep the board armed."""
+    from rodctl.link.attach import attach
+
+    s = Session("sim://")
+    seen = []
+    a = attach(s, arm_mode=P.ArmMode.BALANCE, duration_s=0.3,
+               stopping=lambda: seen.append((s.closed, s.disarm_acked)))
+    assert seen == [(True, True)] and a.ended == "duration"
+
+
+def test_a_bare_session_heartbeats_while_open():
+    """The Python API's Session (no liveness_s) heartbeats for as long as it is open, so a script that only
+    sleeps while a log fills (docs/api.md) keeps its board armed."""
+    with Session("sim://") as s:
+        s.arm(P.ArmMode.BALANCE)
+        time.sleep(4 * s.hello.heartbeat_timeout)
+        assert s.telemetry.mode == P.Mode.CATCH
+
+
 def test_two_sim_ports_are_two_independent_boards():
     with Session("sim://") as a, Session("sim://") as b:
         a.arm(P.ArmMode.SWING_UP)

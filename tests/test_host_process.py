@@ -77,6 +77,29 @@ def test_sigkill_of_log_leaves_a_readable_csv_and_a_board_that_disarms_itself(tm
     assert "closed_utc" not in meta  # no clean close happened
 
 
+def _as_under_nohup() -> None:
+    """Popen preexec_fn: SIGHUP ignored, as `nohup` leaves it (and SIGINT as a terminal gives it)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+
+
+def test_a_log_under_nohup_outlives_the_terminal_that_started_it(tmp_path):
+    """`nohup rodctl log ... &` then logging out: the SIGHUP the terminal sends is ignored, as nohup asks, and
+    the log runs its whole duration (rodctl put its own handler over the ignore and stopped as at a Ctrl-C)."""
+    out = tmp_path / "unattended.csv"
+    log = start_rodctl("log", "--port", "sim://", "--duration", "4", "--out", str(out), preexec_fn=_as_under_nohup)
+    try:
+        _wait_rows(out, 500)
+        log.send_signal(signal.SIGHUP)
+        _, err = log.communicate(timeout=60)
+    finally:
+        if log.poll() is None:
+            log.kill()
+    assert log.returncode == 0, err
+    meta, data = read_log(out)
+    assert meta["end"] == "duration" and len(data) > 500, meta  # not "SIGHUP"
+
+
 @pytest.mark.parametrize("sig, ended", [(signal.SIGINT, "Ctrl-C"), (signal.SIGTERM, "SIGTERM")])
 def test_ctrl_c_or_sigterm_of_log_leaves_a_valid_file_and_disarms(tmp_path, sig, ended):
     """SIGTERM (a service manager, `timeout`) stops as Ctrl-C does, and the log's trailer says which it was."""

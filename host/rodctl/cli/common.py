@@ -130,7 +130,8 @@ def status_text(s: Session, fps: float, rows: int | None = None) -> str:
 
 @contextlib.contextmanager
 def stop_signals():
-    """SIGTERM and SIGHUP stop like Ctrl-C (a KeyboardInterrupt in the main thread, `Stopped` to say which)."""
+    """SIGTERM and SIGHUP stop like Ctrl-C (a KeyboardInterrupt in the main thread, `Stopped` to say which),
+    unless they are ignored (nohup ignores SIGHUP)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -140,7 +141,8 @@ def stop_signals():
 
     old = {}
     for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
-        if sig is not None:
+        # one ignored on purpose stays ignored: `nohup rodctl log ...` outlives the terminal it came from
+        if sig is not None and signal.getsignal(sig) is not signal.SIG_IGN:
             old[sig] = signal.signal(sig, raise_interrupt)
     try:
         yield
@@ -194,6 +196,12 @@ def device_port(args) -> str | None:
     return "sim://?" + urlparse.urlencode(query)
 
 
+LIVENESS_S = 0.5  # a command's session heartbeats only while its main thread looked at the link this recently [s]
+
+
 def session_for(args, **kw) -> Session:
-    """A Session on the command's port (not yet open; use it as a context manager)."""
+    """A Session on the command's port (not yet open; use it as a context manager). Its heartbeats stop when the
+    command's main thread has not checked the link for LIVENESS_S (Session liveness_s): a command stuck on a
+    paused terminal or a hung window leaves the board to disarm itself."""
+    kw.setdefault("liveness_s", LIVENESS_S)
     return Session(device_port(args), **kw)

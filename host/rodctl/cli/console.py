@@ -59,7 +59,8 @@ def run_console(args) -> int:
     if tty:
         with contextlib.suppress(ImportError):
             import readline  # noqa: F401 - line editing and history for input()
-    with stop_signals(), session_for(args) as s:
+    # the console waits at its prompt with the board armed on purpose (the user types `disarm`): always heartbeat
+    with stop_signals(), session_for(args, liveness_s=None) as s:
         h = s.hello
         print(f"connected to {s.port}: firmware {h.fw_major}.{h.fw_minor}.{h.fw_patch}, N={h.n}, "
               f"{1e6 / h.period_us:g} Hz. Heartbeat on while the console is open; 'help' lists commands.")

@@ -25,6 +25,9 @@ from rodctl.build import platformio
 from rodctl.link.session import is_tty
 
 
+BACK_ON_USB_S = 10.0  # how long a flashed board may take to come back on USB [s]
+
+
 def ensure_header(args) -> None:
     """Regenerate firmware/include/rod_gains.h (+ .toml) when the parameters changed."""
     from rodctl.cli.gains import robust_progress
@@ -104,7 +107,17 @@ def run(args, upload: bool) -> int:
             cmd += ["--upload-port", upload_port]
     run_pio_reporting(cmd, project, args.env, what, name, args.verbose)
     if upload:
-        print("flashed: the board restarts DISARMED; check it with `rodctl status`")
+        from rodctl.link.ports import wait_for_board
+
+        # PlatformIO returns while the board restarts: a `rodctl status` at once would find no Teensy
+        back = None if args.no_port_check else wait_for_board(upload_port, BACK_ON_USB_S)
+        if back is not None:
+            print(f"flashed: the board is back on {back}, DISARMED; check it with `rodctl status`")
+        elif args.no_port_check:
+            print("flashed: the board restarts DISARMED; check it with `rodctl status`")
+        else:
+            print(f"flashed, but the board is not back on USB after {BACK_ON_USB_S:g} s: unplug it and plug it in "
+                  "again, then `rodctl status`")
     return 0
 
 
@@ -126,5 +139,6 @@ def register(sub) -> None:
             p.add_argument("--port", metavar="PORT", help="the board's serial port (default: the one Teensy on USB)")
             p.add_argument("--upload-port", metavar="PORT", help="passed to PlatformIO as --upload-port")
             p.add_argument("--no-port-check", action="store_true",
-                           help="upload even when no Teensy serial port is seen (e.g. a board in its bootloader)")
+                           help="upload even when no Teensy serial port is seen (e.g. a board in its bootloader), "
+                                "and do not wait for it to come back on USB after")
         p.set_defaults(func=lambda a, up=upload: run(a, up))

@@ -83,7 +83,7 @@ def attach(session: Session, design_args=None, *, out: str | None = None, fmt: s
 
     design_args: --params/--set, to name the design the board runs (design_params). started(a) is called once
     the session is open and the log begun; armed(ack) with the board's ACK of the ARM; tick(a) every POLL_S
-    while attached; stopping() first when it ends, inside `shield()`, before the board is disarmed.
+    while attached; stopping() when it ends, inside `shield()`, once the board is disarmed.
     interrupted() says whether a Ctrl-C came that something swallowed: then the board is never armed.
     """
     from rodctl.logs.writer import attach_device_log
@@ -117,8 +117,9 @@ def attach(session: Session, design_args=None, *, out: str | None = None, fmt: s
         a.error = e
     finally:
         with shield():
-            stopping()
+            # DISARM first: stopping() writes to the terminal, which may block (paused with Ctrl-S)
             session.close()  # DISARM when possible; every frame received is in the writer now
+            stopping()
             a.counters = session.counters()
             if a.writer is not None:
                 session.remove_listener(a.writer)

@@ -32,3 +32,25 @@ def find_port(explicit: str | None = None) -> str:
         )
     listed = ", ".join(_describe(p) for p in teensies)
     raise UserError(f"{len(teensies)} Teensy boards found: {listed}; choose one with --port")
+
+
+def wait_for_board(port: str | None, timeout_s: float, poll_s: float = 0.2) -> str | None:
+    """After an upload the Teensy restarts and comes back on USB a second or two later: the port it is back
+    on (`port` when given, else the one Teensy) once it is listed again, or None after timeout_s [s]."""
+    import time
+
+    from serial.tools import list_ports
+
+    end = time.monotonic() + timeout_s
+    while True:
+        listed = list(list_ports.comports())
+        if port is not None:
+            if any(p.device == port for p in listed):
+                return port
+        else:
+            teensies = [p.device for p in listed if p.vid == TEENSY_VID and p.pid == TEENSY_PID]
+            if len(teensies) == 1:
+                return teensies[0]
+        if time.monotonic() >= end:
+            return None
+        time.sleep(poll_s)

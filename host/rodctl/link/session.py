@@ -9,7 +9,11 @@
 
 While open, a HEARTBEAT goes out every 100 ms (faster when the device's heartbeat timeout is
 short), so a host that dies or hangs leaves an armed device disarming itself after its
-heartbeat timeout (0.5 s by default) with FAULT reason HEARTBEAT.
+heartbeat timeout (0.5 s by default) with FAULT reason HEARTBEAT. With liveness_s [s] (the
+commands' sessions: rodctl.cli.common.session_for), heartbeats go out only while the code that
+holds the session has called check() (every wait of the session does) within liveness_s: the
+heartbeat thread alone is not someone in control, and a main thread stuck elsewhere (a terminal
+paused with Ctrl-S, a hung window) lets the board disarm itself.
 
 Frames reach listeners (add_listener) in the reader thread, in arrival order, each with the host
 receive time [s since the session opened]. The session's stream starts at the device's ACK of a
@@ -24,6 +28,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import errno
 import itertools
 import math
 import os
@@ -269,8 +274,11 @@ def open_serial(port: str, timeout: float = 0.05):
         return serial.Serial(port, baudrate=115200, timeout=timeout, write_timeout=2.0, exclusive=True)
     except serial.SerialException as e:
         msg = str(e).strip()
-        if "exclusively lock" in msg or "Resource temporarily unavailable" in msg:
+        if "exclusively lock" in msg or "Resource temporarily unavailable" in msg or e.errno == errno.EBUSY:
             raise UserError(f"{port} is in use by another program (another rodctl?)") from None
+        if e.errno == errno.EACCES and not is_url:
+            raise UserError(f"cannot open {port}: permission denied (on Linux: `sudo usermod -aG dialout $USER`, "
+                            "then log in again; and PJRC's udev rules, 00-teensy.rules)") from None
         if not is_url and (isinstance(e.__cause__ or e.__context__, FileNotFoundError) or "No such file" in msg):
             raise UserError(f"cannot open {port}: no such port (is the board plugged in? "
                             "`--port sim://` runs the simulated rod)") from None
@@ -290,10 +298,13 @@ class Session:
     """An open connection to the firmware (see the module doc)."""
 
     def __init__(self, port: str | None = None, *, hello_timeout: float = HELLO_TIMEOUT_S,
-                 heartbeat_interval: float = HEARTBEAT_INTERVAL_S, disarm_on_close: bool = True):
+                 heartbeat_interval: float = HEARTBEAT_INTERVAL_S, disarm_on_close: bool = True,
+                 liveness_s: float | None = None):
         self.port = find_port(port)
         self.hello_timeout = hello_timeout
         self.heartbeat_interval = heartbeat_interval
+        self.liveness_s = liveness_s  # heartbeats only within this of the last check() [s]; None: always
+        self._checked = time.monotonic()
         self.disarm_on_close = disarm_on_close
         self.ser = None
         self.decoder = P.Decoder()
@@ -385,10 +396,19 @@ class Session:
                         break
                 if time.monotonic() >= deadline:
                     if self.decoder.frames == 0:
-                        raise UserError(f"{self.port}: no rodlink frames within {timeout:g} s: is the board "
-                                        "running the rod firmware (flash it with `rodctl flash`)?")
+                        raise self._no_frames(timeout)
                     raise UserError(f"{self.port}: the device does not answer HELLO_REQUEST "
                                     f"(rodctl speaks rodlink v{P.VERSION})")
+
+    def _no_frames(self, timeout: float) -> UserError:
+        """Why no frame came: the board speaks another protocol version (its frames arrive whole, and
+        are not ours to read), or it is not the rod firmware at all."""
+        if self.decoder.version_errors:
+            return UserError(f"{self.port}: the board's firmware speaks another rodlink version than this rodctl "
+                             f"(v{P.VERSION}; {self.decoder.version_errors} frames not read): flash this "
+                             "checkout's firmware (`rodctl flash`), or use the rodctl it was built with")
+        return UserError(f"{self.port}: no rodlink frames within {timeout:g} s: is the board "
+                         "running the rod firmware (flash it with `rodctl flash`)?")
 
     def __enter__(self) -> "Session":
         if self.ser is None:
@@ -434,7 +454,12 @@ class Session:
         return not self.closed and self.disconnected is None
 
     def check(self) -> None:
-        """Raise UserError when the link has ended (unplugged board, stopped virtual device)."""
+        """Raise UserError when the link has ended (unplugged board, stopped virtual device). Also the
+        holder's sign of life that keeps the heartbeats going (liveness_s)."""
+        self._checked = time.monotonic()
+        self._check_link()
+
+    def _check_link(self) -> None:
         if self.reader_error is not None:
             raise UserError(f"{self.port}: {self.disconnected}")
         if self.disconnected is not None:
@@ -584,6 +609,8 @@ class Session:
         while not self._stop.wait(self._interval()):
             if self._hb_paused or self.disconnected is not None:
                 continue
+            if self.liveness_s is not None and time.monotonic() - self._checked > self.liveness_s:
+                continue  # the holder has not looked at the link: nobody is in control
             try:
                 self._send(P.Heartbeat())
             except UserError:
@@ -602,7 +629,7 @@ class Session:
     def _send(self, msg, seq: int | None = None) -> int:
         import serial
 
-        self.check()
+        self._check_link()  # not check(): the heartbeat thread sends too, and is no sign of the holder's life
         if seq is None:
             seq = next(self._seq) & 0xFFFFFFFF
         wire = P.encode(msg, seq, int(time.monotonic() * 1e6) & 0xFFFFFFFF)
@@ -677,8 +704,7 @@ class Session:
                 self.check()
                 if left <= 0:
                     if self.decoder.frames == 0:
-                        raise UserError(f"{self.port}: no rodlink frames within {timeout:g} s: is the board "
-                                        "running the rod firmware (flash it with `rodctl flash`)?")
+                        raise self._no_frames(timeout)
                     raise UserError(f"{self.port}: no HELLO within {timeout:g} s")
                 self._cond.wait(min(left, 0.1))
             return self.hello
