@@ -310,5 +310,5 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     if warn is not None:
         for w in warnings:
             warn(w)
-    return Tracked(str(video_path), video.fps * al.slowdown, F, hub_px, m_per_px, tau, t, tracked, markers_m, quality, al, est,
-                   errors, settled, roll, warnings)
+    return Tracked(str(video_path), video.fps * al.slowdown, F, hub_px, m_per_px, tau, t, tracked, markers_m, quality,
+                   al, est, errors, settled, roll, warnings)
