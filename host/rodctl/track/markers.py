@@ -72,10 +72,18 @@ class Detector:
         hsv = cv2.cvtColor(frame, cv2.COLOR_BGR2HSV)
         mask = self.color.mask(hsv)
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self.kernel)
-        n, _, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        # labelled within the box round the marked pixels only: over a whole 720p frame OpenCV 5's labelling
+        # takes 6 ms, three times the decode; within the rod's few hundred pixels, 0.4 ms
+        x0, y0, w, h = cv2.boundingRect(mask)
+        if w == 0 or h == 0:
+            return np.zeros((0, 3))
+        n, _, stats, centroids = cv2.connectedComponentsWithStats(mask[y0:y0 + h, x0:x0 + w], connectivity=8)
         if n <= 1:
             return np.zeros((0, 3))
-        stats = stats[1:]
+        stats = stats[1:].copy()
+        stats[:, cv2.CC_STAT_LEFT] += x0
+        stats[:, cv2.CC_STAT_TOP] += y0
+        centroids = centroids + (x0, y0)
         area = stats[:, cv2.CC_STAT_AREA]
         keep = (area >= self.MIN_AREA_PX) & (area <= self.max_area) & ~self._on_border(stats, mask.shape)
         return np.column_stack([centroids[1:][keep], area[keep]]).astype(float)
