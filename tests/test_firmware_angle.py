@@ -214,6 +214,13 @@ def test_save_rig_while_armed_is_refused_and_writes_nothing():
         acks = {f.msg.command_seq: f.msg.result for f in P.Decoder().feed(dev.read()) if f.type == P.MsgType.ACK}
         assert acks == {1: P.AckResult.OK, 2: P.AckResult.BAD_STATE, 3: P.AckResult.OK, 4: P.AckResult.OK}
         assert len(dev.eeprom) == 16  # written by the disarmed SAVE_RIG
+        # an ARM right behind a SAVE_RIG waits for the write: the board's main loop is held while it runs
+        dev.write(P.encode(P.SaveRig(), 5) + P.encode(P.Arm(P.ArmMode.SWING_UP), 6))
+        dev.step()
+        dev.write(P.encode(P.Arm(P.ArmMode.SWING_UP), 7))
+        dev.step()
+        acks = {f.msg.command_seq: f.msg.result for f in P.Decoder().feed(dev.read()) if f.type == P.MsgType.ACK}
+        assert acks == {5: P.AckResult.OK, 6: P.AckResult.BUSY, 7: P.AckResult.OK}, acks
     finally:
         dev.close()
 

@@ -167,6 +167,30 @@ class _Port:
         self.device, self.vid, self.pid, self.serial_number = device, vid, pid, None
 
 
+def test_a_board_still_listed_after_the_upload_is_not_taken_as_back_until_it_stays():
+    """PlatformIO may return before the Teensy drops off USB: a port listed at the first look is the board that
+    has not left yet (or is already back); it counts as back only once it has left and returned, or stayed."""
+    from serial.tools import list_ports
+
+    from rodctl.link import ports
+
+    seq = [True, True, False, False, True]  # still there, gone, back
+    calls = []
+
+    def comports():
+        calls.append(1)
+        return [_Port("/dev/ttyACM0")] if seq[min(len(calls), len(seq)) - 1] else []
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(list_ports, "comports", comports)
+        assert ports.wait_for_board("/dev/ttyACM0", timeout_s=30.0, poll_s=0.0, stay_s=30.0) == "/dev/ttyACM0"
+        assert len(calls) == 5  # not at the first look: after it left and came back
+        calls.clear()
+        seq[:] = [True]  # never leaves: back once it has stayed
+        assert ports.wait_for_board("/dev/ttyACM0", timeout_s=30.0, poll_s=0.01, stay_s=0.05) == "/dev/ttyACM0"
+        assert len(calls) >= 3
+
+
 @pytest.mark.parametrize("back_after", [3, None], ids=["back", "not-back"])
 def test_flash_waits_for_the_board_to_come_back_on_usb(tmp_path, monkeypatch, capsys, back_after):
     """PlatformIO returns while the Teensy restarts: `rodctl status` at once found no Teensy. flash now says

@@ -264,6 +264,25 @@ def test_a_bare_session_heartbeats_while_open():
         assert s.telemetry.mode == P.Mode.CATCH
 
 
+def test_a_board_started_by_its_watchdog_says_a_power_cycle_and_not_clear_fault_leaves_it(capsys):
+    """The board's own fault (RESET: started by its watchdog, its zero wherever the rod was): status names it
+    without sending the user to clear-fault, clear-fault says it was not cleared (exit 1), arming is refused
+    with the same words, and the driver is never enabled."""
+    port = "sim://?restart=watchdog"
+    assert cli.main(["status", "--port", port]) == 0
+    mode = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("mode"))
+    assert "FAULT (the board restarted from its watchdog" in mode and "clear-fault" not in mode, mode
+    assert cli.main(["clear-fault", "--port", port]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("rodctl: not cleared: device is in FAULT (the board restarted"), err
+    with Session(port) as s:
+        with pytest.raises(UserError) as e:
+            s.arm(P.ArmMode.SWING_UP)
+        assert "power it off and on with the rod hanging still" in str(e.value) and "clear-fault" not in str(e.value)
+        t = s.wait_telemetry()
+        assert (t.mode, t.reason) == (P.Mode.FAULT, P.Reason.RESET) and not t.flags & P.TelemetryFlag.DRIVER_ENABLED
+
+
 def test_two_sim_ports_are_two_independent_boards():
     with Session("sim://") as a, Session("sim://") as b:
         a.arm(P.ArmMode.SWING_UP)

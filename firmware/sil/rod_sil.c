@@ -228,6 +228,11 @@ void rod_dev_load_rig(const uint8_t *stored, size_t n)
     rod_device_load_rig(&vdev, stored, n, rod_rig_defaults(1, 1));
 }
 
+void rod_dev_board_fault(int reason)
+{
+    rod_device_board_fault(&vdev, (uint8_t)reason);
+}
+
 size_t rod_dev_take_save(uint8_t *out, size_t cap)
 {
     uint8_t bytes[ROD_RIG_STORE_SIZE];

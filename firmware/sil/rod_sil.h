@@ -91,6 +91,9 @@ ROD_SIL_API int rod_dev_status(float *est, int cap);
  * NULL / 0: none, the defaults +1 +1 and the header's counts per turn apply), as the board reads them
  * from its EEPROM at power-on. */
 ROD_SIL_API void rod_dev_load_rig(const uint8_t *stored, size_t n);
+/* After rod_dev_reset: a fault of the board's own (rod_device_board_fault), held in every step until the
+ * next rod_dev_reset; e.g. 12 RESET, the board started after its watchdog with its zero wherever the rod was. */
+ROD_SIL_API void rod_dev_board_fault(int reason);
 /* After a SAVE_RIG: copies the 16 bytes the board would write to its EEPROM and returns 16, once;
  * otherwise 0. They count as written: HELLO flags STORED from the next step on. */
 ROD_SIL_API size_t rod_dev_take_save(uint8_t *out, size_t cap);

@@ -55,7 +55,7 @@ typedef struct {
     float swing_amplitude;     /* [N m], [0, ROD_TORQUE_MAX_NM] */
     float swing_angle;         /* [rad], (0, pi] */
     float catch_angle;         /* [rad], (0, min(ROD_ANGLE_LIMIT_RAD, pi/2)) */
-    float heartbeat_timeout;   /* [s], [0.05, 10] */
+    float heartbeat_timeout;   /* [s], [0.2, 10] */
     uint32_t heartbeat_timeout_us;
     uint16_t decimation;       /* telemetry every this many steps, 1..1000 */
     rod_rig_t rig;             /* wiring signs: count -> angle, duty -> driver (rod_rig.h) */

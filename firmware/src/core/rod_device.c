@@ -99,6 +99,9 @@ static uint8_t apply_command(rod_device_t *dev, const rod_msg_command_t *cmd)
     case ROD_MSG_HEARTBEAT:
         return ROD_ACK_OK;
     case ROD_MSG_ARM:
+        if (dev->save_wanted || dev->save_writing) {
+            return ROD_ACK_BUSY; /* the EEPROM write of a SAVE_RIG holds the main loop: never while armed */
+        }
         return rod_control_arm(c, cmd->arm_mode);
     case ROD_MSG_DISARM:
         return rod_control_disarm(c);
@@ -124,6 +127,9 @@ static uint8_t apply_command(rod_device_t *dev, const rod_msg_command_t *cmd)
         dev->save_wanted = true;
         return ROD_ACK_OK;
     case ROD_MSG_IDENTIFY: {
+        if (dev->save_wanted || dev->save_writing) {
+            return ROD_ACK_BUSY;
+        }
         rod_identify_request_t req = {cmd->excitation, cmd->seed, cmd->amplitude, cmd->duration,
                                       cmd->shape1, cmd->shape2};
         return rod_control_identify(c, &req);

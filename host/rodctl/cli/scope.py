@@ -95,10 +95,9 @@ def run_scope(args) -> int:
                 scope.toggle_recording()
             if ctrl_c_seen():  # a Ctrl-C that something swallowed: end, never arm
                 stop.set()
-            if args.arm and not stop.is_set():
-                scope.action(args.arm)
             h = s.hello
             run_window(scope, stop, duration_s=args.duration, screenshot=args.screenshot, failures=failures,
+                       arm=args.arm if not stop.is_set() else None,
                        ready=lambda: say(f"{s.port} (firmware {h.fw_major}.{h.fw_minor}.{h.fw_patch}, N={h.n}); keys: "
                                          "s swing-up, b balance, d disarm, c clear fault, r record, q quit; closing the "
                                          "window disarms"))

@@ -7,7 +7,8 @@ import json
 from rodctl.cli.common import add_design_args, add_port_arg, session_for, stop_signals
 from rodctl.link import protocol as P
 from rodctl.link.design import apply_settings, design_params
-from rodctl.link.session import SETTINGS, Session, hello_settings, name_of, parse_assignment, reason_text, rig_source
+from rodctl.link.session import (HELD_UNTIL_RESET, SETTINGS, Session, fault_text, hello_settings, name_of,
+                                 parse_assignment, reason_text, rig_source)
 from rodctl.logs.schema import from_upright_deg
 
 
@@ -51,7 +52,7 @@ def run_status(args) -> int:
         return 0
     st = r["settings"]
     mode = r["mode"] + (f" ({reason_text(P.Reason[r['reason']])})" if r["reason"] != "NONE" else "")
-    if r["mode"] == "FAULT":
+    if r["mode"] == "FAULT" and P.Reason[r["reason"]] not in HELD_UNTIL_RESET:  # those say what leaves them
         mode += ": run `rodctl clear-fault`"
     print(f"port        {r['port']}")
     print(f"firmware    {r['firmware_version']} (gains schema {r['gains_schema']}), protocol v{r['protocol_version']}")
@@ -79,8 +80,7 @@ def run_disarm(args) -> int:
     with stop_signals(), session_for(args, disarm_on_close=False) as s:
         ack = s.disarm()
         if ack.mode == P.Mode.FAULT:
-            print(f"device is in FAULT ({reason_text(s.current_reason())}), driver off; "
-                  "run `rodctl clear-fault` to return to DISARMED")
+            print(f"{fault_text(s.current_reason())}; the driver is off")
         else:
             print(f"disarmed: mode {name_of(P.Mode, ack.mode)}")
     return 0

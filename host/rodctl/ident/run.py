@@ -39,7 +39,7 @@ def _wait_rest(session, say: Callable[[str], None], settle: float = 0.0) -> None
     """`settle` seconds, then until the base holds still (the fit starts every record at rest); a
     FAULT is reported."""
     from rodctl.link import protocol as P
-    from rodctl.link.session import reason_text
+    from rodctl.link.session import fault_text
 
     if settle > 0:
         say(f"  letting the rod settle for {settle:g} s")
@@ -52,7 +52,7 @@ def _wait_rest(session, say: Callable[[str], None], settle: float = 0.0) -> None
         session.check()
         t = session.wait_telemetry(timeout=1.0)
         if t.mode == P.Mode.FAULT:
-            raise UserError(f"device is in FAULT ({reason_text(t.reason)}): run `rodctl clear-fault` first")
+            raise UserError(fault_text(t.reason))
         if abs(t.base_rate) < REST_RATE_RAD_S:
             still_since = still_since or time.monotonic()
             if time.monotonic() - still_since >= REST_HOLD_S:

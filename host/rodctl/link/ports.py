@@ -34,23 +34,32 @@ def find_port(explicit: str | None = None) -> str:
     raise UserError(f"{len(teensies)} Teensy boards found: {listed}; choose one with --port")
 
 
-def wait_for_board(port: str | None, timeout_s: float, poll_s: float = 0.2) -> str | None:
+def wait_for_board(port: str | None, timeout_s: float, poll_s: float = 0.2, stay_s: float = 2.0) -> str | None:
     """After an upload the Teensy restarts and comes back on USB a second or two later: the port it is back
-    on (`port` when given, else the one Teensy) once it is listed again, or None after timeout_s [s]."""
+    on (`port` when given, else the one Teensy) once it has left the list and is in it again, or has stayed
+    in it stay_s [s] (it was back before the first look); None after timeout_s [s]."""
     import time
 
     from serial.tools import list_ports
 
     end = time.monotonic() + timeout_s
+    gone, listed_since = False, None
     while True:
         listed = list(list_ports.comports())
         if port is not None:
-            if any(p.device == port for p in listed):
-                return port
+            here = port if any(p.device == port for p in listed) else None
         else:
             teensies = [p.device for p in listed if p.vid == TEENSY_VID and p.pid == TEENSY_PID]
-            if len(teensies) == 1:
-                return teensies[0]
-        if time.monotonic() >= end:
+            here = teensies[0] if len(teensies) == 1 else None
+        now = time.monotonic()
+        if here is None:
+            gone, listed_since = True, None
+        elif gone:
+            return here
+        elif listed_since is None:
+            listed_since = now
+        elif now - listed_since >= stay_s:
+            return here
+        if now >= end:
             return None
         time.sleep(poll_s)

@@ -82,6 +82,14 @@ def reason_text(reason) -> str:
         return f"reason {int(reason)}"
 
 
+def fault_text(reason) -> str:
+    """The board is in FAULT for `reason`: why, and what leaves it (clear-fault, or for the board's own faults
+    the restart their words name)."""
+    if int(reason) in HELD_UNTIL_RESET:
+        return f"device is in FAULT ({reason_text(reason)})"
+    return f"device is in FAULT ({reason_text(reason)}): run `rodctl clear-fault`"
+
+
 def mode_text(mode, reason) -> str:
     m = name_of(P.Mode, mode)
     if int(mode) == P.Mode.FAULT:
@@ -638,7 +646,7 @@ class Session:
                 self.ser.write(wire)
         except (serial.SerialException, OSError) as e:
             self._lost(str(e) or type(e).__name__)
-            self.check()
+            self._check_link()
         return seq
 
     def command(self, msg, timeout: float = ACK_TIMEOUT_S, what: str | None = None):
@@ -672,12 +680,12 @@ class Session:
         result = name_of(P.AckResult, ack.result)
         if ack.result == P.AckResult.BAD_STATE:
             if ack.mode == P.Mode.FAULT:
-                return f"device is in FAULT ({reason_text(self.current_reason())}): run `rodctl clear-fault`"
+                return fault_text(self.current_reason())
             return f"device refused {what} in mode {name_of(P.Mode, ack.mode)}"
         if ack.result == P.AckResult.BAD_VALUE:
             return f"device refused {what}: value out of range"
         if ack.result == P.AckResult.BUSY:
-            return f"device refused {what}: busy (command queue full), try again"
+            return f"device refused {what}: busy (its command queue full, or storing the rig settings), try again"
         return (f"device refused {what} ({result}): the firmware and this rodctl speak different "
                 f"protocol versions? (rodctl protocol v{P.VERSION})")
 
@@ -730,7 +738,11 @@ class Session:
         return self.command(P.Disarm(), what="disarm")
 
     def clear_fault(self):
-        return self.command(P.ClearFault(), what="clear-fault")
+        """CLEAR_FAULT; UserError when the board keeps the fault (its own: only a restart leaves it)."""
+        ack = self.command(P.ClearFault(), what="clear-fault")
+        if ack.mode == P.Mode.FAULT:
+            raise UserError(f"not cleared: {fault_text(self.current_reason())}")
+        return ack
 
     def set(self, setting: Setting | str, value: float, design_params=None):
         """Set one run-time setting (value in the setting's user unit); returns the ack."""

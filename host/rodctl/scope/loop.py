@@ -59,20 +59,26 @@ def _quit_window_loop(fig) -> None:
 
 
 def run_window(scope: Scope, stop: threading.Event, *, duration_s: float | None, screenshot: str | None,
-               failures: list, ready: Callable[[], None]) -> None:
+               failures: list, ready: Callable[[], None], arm: str | None = None) -> None:
     """Show the window until it is closed, q, `stop` is set or duration_s [s] has passed; `ready` is called once the
-    redraw timer runs, just before the window shows. What fails in the window's callbacks, or in saving the
-    screenshot [PNG] as the window last looked, is appended to `failures` and ends the scope."""
+    redraw timer runs, just before the window shows. arm: the scope's action ("swing-up", "balance") done on the
+    first tick, once the window is up: the session heartbeats only while the window's ticks look at the link, and
+    drawing a new window on a slow machine can outlast that. What fails in the window's callbacks, or in saving
+    the screenshot [PNG] as the window last looked, is appended to `failures` and ends the scope."""
     fig = scope.fig
     t_end = None if duration_s is None else time.monotonic() + duration_s
 
     shot = {"tried": False}
     ending = {"since": None}
+    to_arm = [arm] if arm else []
 
     def tick():
         # Nothing may escape: an exception in a GUI callback is printed and the loop goes on, with the
         # heartbeat keeping the board armed. Any failure ends the scope (the session then disarms).
         try:
+            if to_arm and not stop.is_set():
+                scope.s.check()  # the link looked at first: the heartbeats go on from here
+                scope.action(to_arm.pop())
             if stop.is_set() or (t_end is not None and time.monotonic() >= t_end):
                 if ending["since"] is None:
                     ending["since"] = time.monotonic()

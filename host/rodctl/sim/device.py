@@ -91,6 +91,7 @@ def _prototype(lib: ctypes.CDLL) -> ctypes.CDLL:
         "rod_dev_read": (sz, [ctypes.c_void_p, sz]),
         "rod_dev_load_rig": (None, [ctypes.c_char_p, sz]),
         "rod_dev_take_save": (sz, [ctypes.c_void_p, sz]),
+        "rod_dev_board_fault": (None, [i]),
         "rod_dev_imu": (None, [f, f, f, i]),
     }
     for name, (res, args) in protos.items():
@@ -187,6 +188,8 @@ class VirtualDevice:
         self.eeprom_path = eeprom_path
         self.eeprom = self.eeprom_path.read_bytes() if self.eeprom_path and self.eeprom_path.is_file() else b""
         self.lib.rod_dev_load_rig(self.eeprom or None, len(self.eeprom))
+        if self.faults.restart_reason:  # started by its watchdog or a lockup, not powered on (main.cpp setup)
+            self.lib.rod_dev_board_fault(self.faults.restart_reason)
         self._save_buf = ctypes.create_string_buffer(RIG_STORE_BYTES)
         self.steps = 0
         self._closed = False

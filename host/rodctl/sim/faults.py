@@ -15,6 +15,8 @@ firmware's host build, where the board layer would see it:
     header=stale         the firmware was built from another design than the parameter file's
     hand=none            nobody stands by the virtual rod (steps that need a hand wait for a human)
     imu_tilt_deg=X       the tip IMU sits X deg more tilted on the rod than sensors.imu_tilt_deg says
+    restart=watchdog     the board started after its watchdog (or restart=lockup) rather than a power-on:
+                         its zero is wherever the rod was, and it holds FAULT (reason RESET)
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from dataclasses import dataclass
 from rodgains.errors import InputError
 
 FAULT_OPTIONS = ("encoder_sign", "motor_sign", "encoder", "ab_swapped", "counts_per_rev", "nfault", "supply",
-                 "boot_angle_deg", "header", "hand", "imu_tilt_deg")
+                 "boot_angle_deg", "header", "hand", "imu_tilt_deg", "restart")
 
 # header=stale: the board's firmware was designed for a rod 20 % stiffer than the parameter file says
 STALE_OVERRIDE_KEY = "rod.youngs_modulus"
@@ -51,6 +53,7 @@ class Faults:
     header_stale: bool = False
     hand: bool = True  # a virtual hand can turn the rod (VirtualDevice.hand_turn)
     imu_tilt_deg: float = 0.0  # the tip IMU's mounting tilt beyond the design's [deg]
+    restart_reason: int = 0  # the board's own fault at start-up (protocol reason RESET), 0 after a power-on
 
     @classmethod
     def from_options(cls, opts: dict[str, str]) -> "Faults":
@@ -73,6 +76,11 @@ class Faults:
             kw["header_stale"] = _choice("header", opts["header"], {"current": False, "stale": True})
         if "hand" in opts:
             kw["hand"] = _choice("hand", opts["hand"], {"virtual": True, "none": False})
+        if "restart" in opts:
+            from rodctl.link.protocol import Reason
+
+            kw["restart_reason"] = _choice("restart", opts["restart"], {"power-on": 0, "watchdog": int(Reason.RESET),
+                                                                        "lockup": int(Reason.RESET)})
         if "counts_per_rev" in opts:
             kw["counts_per_rev"] = _number("counts_per_rev", opts["counts_per_rev"], 1.0, 1e7, "counts per output turn")
         if "imu_tilt_deg" in opts:
@@ -112,6 +120,8 @@ class Faults:
             parts.append("firmware of another design")
         if self.imu_tilt_deg:
             parts.append(f"tip IMU tilted {self.imu_tilt_deg:g} deg more than designed")
+        if self.restart_reason:
+            parts.append("started by its watchdog, not a power-on")
         return ", ".join(parts)
 
 

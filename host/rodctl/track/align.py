@@ -37,13 +37,14 @@ SLOWDOWNS = tuple(sorted({c / p for c in (60, 120, 240, 480, 960) for p in (24, 
 # a wrong lag 0.86 s off. A swinging rod is nearly periodic, so a partial overlap can fit well by
 # chance; it has to fit better than the full one by 0.02 per share lost to win.
 OVERLAP_PENALTY = 0.02
+COARSE_STEP_MIN_S = 1e-3  # the coarse search's grid step at least: the log's sample period at 1 kHz [s]
 AT_LIMIT = 0.99  # a fitted value this close to its bound is pinned there, not found [-]
 
 
 @dataclass
 class Alignment:
     offset_s: float  # the log's time of the video's first frame [s]
-    rate: float  # log seconds per video second [-]
+    rate: float  # log seconds per second filmed (the file's seconds / slowdown) [-]
     angle_offset_rad: float  # camera base angle minus encoder angle, constant part [rad]
     correlation: float  # Pearson r of the fitted base angles [-]
     residual_rad: float  # RMS of the fit [rad]
@@ -61,8 +62,10 @@ class Alignment:
         return self.offset_s + self.rate * np.asarray(video_t) / self.slowdown
 
 
-def _coarse(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarray, dt: float) -> tuple[float, float]:
-    """(offset [s], r) of the best normalized cross-correlation on a common grid of step dt.
+def _coarse(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarray,
+            dt: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    """((offset [s], r) of the best normalized cross-correlation on a common grid of step dt, the same of
+    the camera's angle negated): -beta correlates -r at every lag, so one correlation gives both.
 
     Every lag at once: the products' sums from one FFT correlation, the overlaps' sums and sums of
     squares from running sums, so a long video against a long log costs O((n + m) log(n + m))."""
@@ -84,9 +87,12 @@ def _coarse(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.nda
     cov = sxy - sx * sy / k
     den = np.sqrt(np.maximum(sxx - sx * sx / k, 0.0) * np.maximum(syy - sy * sy / k, 0.0))
     r = np.divide(cov, den, out=np.zeros_like(cov), where=den > 0)
-    score = np.where(k >= need, r - OVERLAP_PENALTY * (1.0 - k / n), -np.inf)
-    best = int(np.argmax(score))
-    return grid[0] + lags[best] * dt - tau[0], float(r[best])
+    penalty = np.where(k >= need, OVERLAP_PENALTY * (1.0 - k / n), np.inf)
+    out = []
+    for sign in (1.0, -1.0):
+        best = int(np.argmax(sign * r - penalty))
+        out.append((grid[0] + lags[best] * dt - tau[0], float(sign * r[best])))
+    return out[0], out[1]
 
 
 def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarray, fps: float,
@@ -104,8 +110,10 @@ def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarr
                          "align it with the log (swing the rod by hand at the start of the run)")
     r0, offset0, slowdown, sign = -np.inf, 0.0, 1.0, 1.0
     for s in slowdowns:  # in the order given: of equal fits the first (1, unmirrored) is kept
-        for sg in (1.0, -1.0):
-            off, r = _coarse(tau / s, sg * beta, t_log, th_log, 1.0 / (fps * s))
+        # a frame's step, no finer than the log's samples: a fast factor of a fast file would grid the log
+        # at up to 40 x the video's rate (a minute's log: hundreds of MB)
+        dt = max(1.0 / (fps * s), COARSE_STEP_MIN_S)
+        for sg, (off, r) in zip((1.0, -1.0), _coarse(tau / s, beta, t_log, th_log, dt)):
             if r > r0:
                 r0, offset0, slowdown, sign = r, off, s, sg
     mirrored = sign < 0

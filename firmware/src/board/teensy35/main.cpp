@@ -87,7 +87,9 @@ static void apply(const rod_outputs_t &out)
 // goes off on the first step that sees the request.
 static bool upload_requested()
 {
-    return Serial.baud() == 134u;  // one 32-bit word the USB interrupt writes: a whole read
+    // usb_dev.c copies the line coding a byte at a time, and this step may preempt that copy: it then
+    // reads a mix of two rates for one period, and 134 only from a host that sets a rate no host uses
+    return Serial.baud() == 134u;
 }
 
 static void control_step()
