@@ -196,7 +196,10 @@ def device_port(args) -> str | None:
     return "sim://?" + urlparse.urlencode(query)
 
 
-LIVENESS_S = 0.5  # a command's session heartbeats only while its main thread looked at the link this recently [s]
+# A command's session heartbeats only while its main thread looked at the link this recently [s]: longer than
+# any pause of a healthy command (a Parquet row group written on a slow card, a window's redraw), short enough
+# that a stuck one leaves the board to disarm itself within 1.5 s (with its 0.5 s heartbeat timeout)
+LIVENESS_S = 1.0
 
 
 def session_for(args, **kw) -> Session:
