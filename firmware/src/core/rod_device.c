@@ -35,6 +35,12 @@ void rod_device_load_rig(rod_device_t *dev, const uint8_t *stored, size_t n, rod
     }
 }
 
+/* A SAVE_RIG's record is waiting for the main loop, or being written by it (rod_device_saved ends it). */
+static bool rig_saving(const rod_device_t *dev)
+{
+    return dev->save_wanted || dev->save_writing;
+}
+
 /* STORED: the settings in use are the record in storage (a SET since then clears it), and any
  * SAVE_RIG's record has been written (rod_device_saved). */
 static uint8_t rig_flags(const rod_device_t *dev)
@@ -42,7 +48,7 @@ static uint8_t rig_flags(const rod_device_t *dev)
     uint8_t now[ROD_RIG_STORE_SIZE];
     rod_rig_encode(&dev->control.settings.rig, now);
     uint8_t flags = (uint8_t)(rod_rig_sign_flags(&dev->control.settings.rig) | dev->rig_corrupt);
-    if (!dev->save_wanted && !dev->save_writing && memcmp(now, dev->rig_kept, sizeof now) == 0) {
+    if (!rig_saving(dev) && memcmp(now, dev->rig_kept, sizeof now) == 0) {
         flags |= ROD_RIG_FLAG_STORED;
     }
     return flags;
@@ -99,7 +105,7 @@ static uint8_t apply_command(rod_device_t *dev, const rod_msg_command_t *cmd)
     case ROD_MSG_HEARTBEAT:
         return ROD_ACK_OK;
     case ROD_MSG_ARM:
-        if (dev->save_wanted || dev->save_writing) {
+        if (rig_saving(dev)) {
             return ROD_ACK_BUSY; /* the EEPROM write of a SAVE_RIG holds the main loop: never while armed */
         }
         return rod_control_arm(c, cmd->arm_mode);
@@ -127,7 +133,7 @@ static uint8_t apply_command(rod_device_t *dev, const rod_msg_command_t *cmd)
         dev->save_wanted = true;
         return ROD_ACK_OK;
     case ROD_MSG_IDENTIFY: {
-        if (dev->save_wanted || dev->save_writing) {
+        if (rig_saving(dev)) {
             return ROD_ACK_BUSY;
         }
         rod_identify_request_t req = {cmd->excitation, cmd->seed, cmd->amplitude, cmd->duration,

@@ -141,9 +141,10 @@ def run_track_command(args) -> int:
 
     if args.plot:  # the panels' times checked before anything is written
         times = _panel_times(at, r.time_s, np.isfinite(r.theta).all(axis=1))
-    meta = {"video": args.video, "log": args.log, "fps": r.fps, "slowdown": a.slowdown, "fps_note": "the rate filmed; video_time_s is the file's clock (slowdown x)",
-            "offset_s": a.offset_s, "drift_ppm": a.drift_ppm,
-            "correlation": a.correlation, "mirrored": a.mirrored, "m_per_px": r.m_per_px, "hub_px": f"{r.hub_px[0]:.2f},{r.hub_px[1]:.2f}",
+    meta = {"video": args.video, "log": args.log, "fps": r.fps, "slowdown": a.slowdown,
+            "fps_note": "the rate filmed; video_time_s is the file's clock (slowdown x)",
+            "offset_s": a.offset_s, "drift_ppm": a.drift_ppm, "correlation": a.correlation, "mirrored": a.mirrored,
+            "m_per_px": r.m_per_px, "hub_px": f"{r.hub_px[0]:.2f},{r.hub_px[1]:.2f}",
             "quality": "0 every marker seen, 1 a marker filled in, 2 too few markers, 3 a repeated frame"}
     cols = columns(r.time_s, r.video_time_s, r.theta, r.markers_m, r.quality)
     write_parquet(out, cols, meta)

@@ -14,6 +14,10 @@ def _describe(p) -> str:
     return f"{p.device} ({ident}{serial})"
 
 
+def _is_teensy(p) -> bool:
+    return p.vid == TEENSY_VID and p.pid == TEENSY_PID
+
+
 def find_port(explicit: str | None = None) -> str:
     """The port to open: `explicit` when given, else the one Teensy on USB; one clear error otherwise."""
     if explicit:
@@ -21,7 +25,7 @@ def find_port(explicit: str | None = None) -> str:
     from serial.tools import list_ports
 
     ports = list(list_ports.comports())
-    teensies = [p for p in ports if p.vid == TEENSY_VID and p.pid == TEENSY_PID]
+    teensies = [p for p in ports if _is_teensy(p)]
     if len(teensies) == 1:
         return teensies[0].device
     if not teensies:
@@ -49,7 +53,7 @@ def wait_for_board(port: str | None, timeout_s: float, poll_s: float = 0.2, stay
         if port is not None:
             here = port if any(p.device == port for p in listed) else None
         else:
-            teensies = [p.device for p in listed if p.vid == TEENSY_VID and p.pid == TEENSY_PID]
+            teensies = [p.device for p in listed if _is_teensy(p)]
             here = teensies[0] if len(teensies) == 1 else None
         now = time.monotonic()
         if here is None:

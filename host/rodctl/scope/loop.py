@@ -77,7 +77,6 @@ def run_window(scope: Scope, stop: threading.Event, *, duration_s: float | None,
         # heartbeat keeping the board armed. Any failure ends the scope (the session then disarms).
         try:
             if to_arm and not stop.is_set():
-                scope.s.check()  # the link looked at first: the heartbeats go on from here
                 scope.action(to_arm.pop())
             if stop.is_set() or (t_end is not None and time.monotonic() >= t_end):
                 if ending["since"] is None:
