@@ -47,8 +47,10 @@
 #define ROD_TRIM_HOLD_K             0.00498752063f  /* held-torque low-pass, 0.2 s, per period [-] */
 #define ROD_TRIM_RATE               0.00140383665f  /* set-point trim per N m beyond the band, per period [rad/(N m)]: 2 s on the design model (G = 0.3562 N m/rad) */
 #define ROD_TRIM_BAND_NM            0.000500000024f  /* steady torque the trim leaves alone [N m]: trim.flank_hold - motor.coulomb_friction, within trim.band to band_max */
+#define ROD_TRIM_TARGET_NM          0.0f  /* steady torque the trim holds [N m]: the straightest static shape of a rod curved at rest (rod.rest_curvature) */
+#define ROD_TRIM_START_RAD          0.0f  /* the trim at power-on [rad]: that shape's hub angle */
 #define ROD_TRIM_GATE_RAD           0.052359879f  /* trims only with every estimated angle within this of upright [rad] */
-#define ROD_TRIM_MAX_RAD            0.0872664601f  /* |trim| ceiling [rad] */
+#define ROD_TRIM_MAX_RAD            0.0872664601f  /* how far the trim may walk from its start [rad] */
 #define ROD_NY                      1  /* measurements the estimator reads: theta_1, then the tip IMU's gyro and accelerometer y */
 #define ROD_IMU_GYRO_RANGE_RAD_S    69.8000031f  /* the IMU's gyro full scale [rad/s] */
 #define ROD_IMU_ACCEL_RANGE_M_S2    156.899994f  /* its accelerometer's [m/s^2] */

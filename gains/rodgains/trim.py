@@ -14,6 +14,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import sampled
+from .buckling import clamped_ratio
 
 
 class TrimGains(NamedTuple):
@@ -25,6 +26,59 @@ class TrimGains(NamedTuple):
     gate: float  # trims only while every estimated angle is within this of upright [rad]
     limit: float  # |trim| ceiling [rad]
     torque_per_offset: float  # G: steady torque per rad of measurement offset on the design model [N m/rad]
+    target: float = 0.0  # the steady torque the trim holds: the straightest shape's (straightest_shape) [N m]
+    start: float = 0.0  # the trim at power-on: the straightest shape's hub in the encoder's angle [rad]
+
+
+# the rod's statics are taken on this many edges, whatever the design's order: a shape, not a controller
+STATICS_EDGES = 40
+
+
+class StraightestShape(NamedTuple):
+    """Where the trim aims on a rod curved at rest (SI units)."""
+
+    torque: float  # the steady base torque that holds the straightest static shape upright [N m]
+    hub: float  # its hub's angle from upright [rad]
+
+
+def straightest_shape(params) -> StraightestShape:
+    """The file's rod's straightest static shape upright: the one whose largest edge deviation from upright is
+    smallest. Zero for a rod straight at rest. A rod curved at rest (rod.rest_curvature) has no straight upright
+    shape: its zero-moment shape leans the curvature's way, amplified by gravity, and tilting the hub against the
+    bend with a steady torque halves the worst edge's lean (docs/control.md, "A rod curved at rest").
+
+    The curvature is the rod's shape hanging with its hub vertical (rodctl.sim.statics hanging_tip_offset_m), where
+    the encoder's zero is taken, so the trim starts at the shape's hub angle; a hub left elsewhere at boot is an
+    error of the zero like any other, which the trim takes up.
+
+    Linear statics about upright of the rod at STATICS_EDGES edges: within 0.04 mN m of the faithful
+    plant's nonlinear statics on the matrix's curved rod (rodctl.sim.statics)."""
+    kappa = params["rod"]["rest_curvature"]
+    if kappa == 0.0 or clamped_ratio(params) >= 1.0:  # straight, or no static shape near upright to aim at
+        return StraightestShape(0.0, 0.0)
+    from .rod_model import RodModel
+
+    m = RodModel.from_params(params, edges=STATICS_EDGES)
+    # about upright the bending springs give (EI / l) Lp and gravity -m g l c_i on each edge; each
+    # joint's rest angle kappa l is a constant load: edge angles delta = a + b T for a base torque T
+    bend = (m.EI / m.l) * m.laplacian
+    weight = np.diag(m.m * m.g * m.l * m.mass_below)
+    rest = np.zeros(m.N)
+    rest[:-1] += m.EI * kappa
+    rest[1:] -= m.EI * kappa
+    a = np.linalg.solve(bend - weight, -rest)
+    b = np.linalg.solve(bend - weight, np.eye(m.N)[0])
+    # the largest |a_i + b_i T| is convex and piecewise linear in T: its least value sits where two edges' lines meet
+    i, j = np.triu_indices(m.N, k=1)
+    cands = [-a / b]
+    for sign in (1.0, -1.0):
+        den = b[i] - sign * b[j]
+        ok = np.abs(den) > 1e-15
+        cands.append(-(a[i] - sign * a[j])[ok] / den[ok])
+    T = np.concatenate(cands)
+    worst = np.abs(a[None, :] + np.outer(T, b)).max(axis=1)
+    best = float(T[np.argmin(worst)])
+    return StraightestShape(torque=best, hub=float(a[0] + b[0] * best))
 
 
 def static_torque_per_offset(d) -> float:
@@ -49,6 +103,14 @@ def band_nm(params) -> float:
     return max(t["band"], min(t["flank_hold"] - coulomb, t["band_max"]))
 
 
+def blind(params, G: float) -> bool:
+    """Is the trim's band wider than its range on this rod: the zero error whose steady torque G delta fills the
+    band (band / G) more than trim.limit_deg? Then the trim cannot tell upright from anywhere it may walk, and on a
+    short stiff rod it walks to its limit on the friction's torque: a 4 cm rod (band / G 5.6 deg) ended 5.9 deg off
+    with the trim and 0.7 without (docs/control.md, "Finding upright")."""
+    return abs(G) > 1e-9 and band_nm(params) / abs(G) > math.radians(params["trim"]["limit_deg"])
+
+
 def trim_gains(d) -> TrimGains:
     """rod_trim's gains for a Design (its params' [trim] table); rate 0 when the trim is off."""
     t = d.params["trim"]
@@ -56,7 +118,9 @@ def trim_gains(d) -> TrimGains:
         return TrimGains(hold_k=1.0 - math.exp(-d.dt / t["hold_time_constant"]), rate=0.0, band=band_nm(d.params),
                          gate=math.radians(t["gate_deg"]), limit=math.radians(t["limit_deg"]), torque_per_offset=0.0)
     G = static_torque_per_offset(d)
-    on = t["time_constant"] > 0 and abs(G) > 1e-9
+    on = t["time_constant"] > 0 and abs(G) > 1e-9 and not blind(d.params, G)
+    aim = straightest_shape(d.params) if on else StraightestShape(0.0, 0.0)
     return TrimGains(hold_k=1.0 - math.exp(-d.dt / t["hold_time_constant"]),
                      rate=d.dt / (G * t["time_constant"]) if on else 0.0, band=band_nm(d.params),
-                     gate=math.radians(t["gate_deg"]), limit=math.radians(t["limit_deg"]), torque_per_offset=G)
+                     gate=math.radians(t["gate_deg"]), limit=math.radians(t["limit_deg"]), torque_per_offset=G,
+                     target=aim.torque, start=aim.hub)

@@ -32,7 +32,7 @@
     || !defined(ROD_HEARTBEAT_TIMEOUT_S) || !defined(ROD_GAINS_SHA256_BYTES_INIT) \
     || !defined(ROD_AD_INIT) || !defined(ROD_BD_INIT) || !defined(ROD_K_INIT) || !defined(ROD_L_INIT) \
     || !defined(ROD_L_DISTURBANCE) || !defined(ROD_W_DECAY) || !defined(ROD_K_TORQUE_PREV) \
-    || !defined(ROD_TRIM_HOLD_K) || !defined(ROD_TRIM_RATE) || !defined(ROD_TRIM_BAND_NM) \
+    || !defined(ROD_TRIM_HOLD_K) || !defined(ROD_TRIM_RATE) || !defined(ROD_TRIM_BAND_NM) || !defined(ROD_TRIM_TARGET_NM) || !defined(ROD_TRIM_START_RAD) \
     || !defined(ROD_TRIM_GATE_RAD) || !defined(ROD_TRIM_MAX_RAD) || !defined(ROD_NY) \
     || !defined(ROD_IMU_GYRO_RANGE_RAD_S) || !defined(ROD_IMU_ACCEL_RANGE_M_S2) \
     || !defined(ROD_IMU_TILT_COS) || !defined(ROD_IMU_TILT_SIN)

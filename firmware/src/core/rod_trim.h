@@ -9,7 +9,12 @@
  *
  *     hold += ROD_TRIM_HOLD_K (u - hold)                     low-passed torque given, compensation included
  *     while every estimated angle is within ROD_TRIM_GATE_RAD of upright (quasi-static):
- *         trim += ROD_TRIM_RATE * dz(hold, ROD_TRIM_BAND_NM),   |trim| <= ROD_TRIM_MAX_RAD
+ *         trim += ROD_TRIM_RATE * dz(hold - ROD_TRIM_TARGET_NM, ROD_TRIM_BAND_NM),   |trim - ROD_TRIM_START_RAD| <= ROD_TRIM_MAX_RAD
+ *
+ * ROD_TRIM_TARGET_NM is 0 for a straight rod. A rod curved at rest (rod.rest_curvature) has no straight upright
+ * shape: its zero-torque shape leans the curvature's way, and the straightest one is held by a steady torque
+ * that tilts the hub against the bend (gains/rodgains/trim.py straightest_shape): the trim starts at that shape's
+ * hub angle, ROD_TRIM_START_RAD, and seeks its torque.
  *
  * dz is a dead zone: the trim stops once the steady torque is inside the band, not at zero. With
  * backlash the zero-torque point lies inside the gap, where nothing holds the rod's foot; the rod rests

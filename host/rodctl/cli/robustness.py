@@ -55,7 +55,7 @@ def _fmt(v, nd=2) -> str:
 
 def table_lines(rows: list[dict]) -> list[str]:
     """A line per case (both tasks side by side); Monte Carlo plants summed up at the end."""
-    from rodctl.sim.matrix import TASKS, buckled
+    from rodctl.sim.matrix import ROBUST_BAND_DEG, TASKS, buckled, past_band
 
     def cell(r):
         if r is None:
@@ -68,7 +68,8 @@ def table_lines(rows: list[dict]) -> list[str]:
         if r.get("kind") != "draw":
             by.setdefault(r["case"], {})[r["task"]] = r
     past = {name: r["buckling_ratio"] for name, d in by.items() for r in d.values() if buckled(r)}
-    names = {name: name + (" ^" if name in past else "") for name in by}
+    bent = {name: r["straightest_deg"] for name, d in by.items() for r in d.values() if past_band(r)}
+    names = {name: name + (" ^" if name in past else "") + (" ~" if name in bent else "") for name in by}
     w = max([14, *map(len, names.values())])  # the case column as wide as its longest name
     lines = [f"  {'':{w}s}" + "".join(f" | {t:^28s}" for t in TASKS),
              f"  {'case':{w}s}" + "".join(f" | {'settle s':>9s} {'end deg':>9s} {'result':>8s}" for _ in TASKS)]
@@ -89,6 +90,10 @@ def table_lines(rows: list[dict]) -> list[str]:
         lines.append("  ^ past the buckling length: the rod above the hub is longer than Greenhill's clamped length"
                      + which + ", so it bends over whenever the shaft holds still "
                      "(rodctl gains --report; docs/identification.md)")
+    if bent:
+        which = ", ".join(f"{name} {v:.2f} deg" for name, v in bent.items())
+        lines.append(f"  ~ no shape within {ROBUST_BAND_DEG:g} deg of upright: a rod curved at rest whose straightest static "
+                     f"shape ({which}) is past the band, whatever the controller (docs/control.md)")
     return lines
 
 

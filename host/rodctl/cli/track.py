@@ -61,7 +61,7 @@ def run_track_command(args) -> int:
     from rodctl.track import track
     from rodctl.track.compare import table_lines
     from rodctl.track.markers import ColorRange
-    from rodctl.track.output import columns, write_mcap, write_parquet
+    from rodctl.track.output import columns, rest_shape_meta, write_mcap, write_parquet
     from rodctl.track.shape import QUALITY_TEXT
 
     # every input and output checked before the video is read
@@ -126,6 +126,8 @@ def run_track_command(args) -> int:
     finally:
         if bar is not None:
             bar.close()
+    if r.rest_shape is None:  # track() says a measured one itself
+        print(r.rest_note)
     a = r.alignment
     q = r.counts()
     print(f"video: {r.frames} frames at {r.fps:g} fps; hub at ({r.hub_px[0]:.1f}, {r.hub_px[1]:.1f}) px, "
@@ -146,6 +148,7 @@ def run_track_command(args) -> int:
             "offset_s": a.offset_s, "drift_ppm": a.drift_ppm, "correlation": a.correlation, "mirrored": a.mirrored,
             "m_per_px": r.m_per_px, "hub_px": f"{r.hub_px[0]:.2f},{r.hub_px[1]:.2f}",
             "quality": "0 every marker seen, 1 a marker filled in, 2 too few markers, 3 a repeated frame"}
+    meta.update(rest_shape_meta(r.rest_shape, r.rest_note))
     cols = columns(r.time_s, r.video_time_s, r.theta, r.markers_m, r.quality)
     write_parquet(out, cols, meta)
     mcap = out.with_suffix(".mcap")

@@ -125,9 +125,9 @@ def from_rows(rows: list[dict], params: Params, cases: str) -> Verdict:
     """The verdict on matrix rows (one per case and task) of the design `params` on its own rig."""
     from rodgains.buckling import clamped_ratio
 
-    from rodctl.sim.matrix import KNOWN_FAILURES, buckled
+    from rodctl.sim.matrix import KNOWN_FAILURES, buckled, past_band
 
-    in_range = [r for r in rows if (r["case"], r["task"]) not in KNOWN_FAILURES and not buckled(r)]
+    in_range = [r for r in rows if (r["case"], r["task"]) not in KNOWN_FAILURES and not buckled(r) and not past_band(r)]
     failed = tuple(f"{r['case']}/{r['task']}" for r in in_range if not r.get("passed"))
     nominal = {r["task"]: r for r in rows if r["case"] == "nominal"}
     return Verdict(cases=cases, passed=sum(1 for r in rows if r.get("passed")), runs=len(rows),

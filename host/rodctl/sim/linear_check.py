@@ -21,7 +21,7 @@ from rodgains import sampled
 from rodgains.buckling import clamped_ratio
 from rodgains.design import Design
 from rodgains.report import least_damped
-from rodgains.trim import trim_gains
+from rodgains.trim import STATICS_EDGES, blind, trim_gains
 
 from rodctl.sim import convergence, matrix
 from rodctl.sim.imu import linear_rows
@@ -131,6 +131,38 @@ def corner_radii(d: Design) -> list[Corner]:
     return out
 
 
+def _curvature_lines(d: Design) -> list[str]:
+    """How near upright a steady base torque can hold the rod if it is curved at rest, what the trim holds, and the
+    matrix's curved case on this rig (rodctl.sim.statics)."""
+    from rodctl.sim.matrix import CASES, ROBUST_BAND_DEG, apply_overrides
+    from rodctl.sim.statics import hanging_tip_offset_m, straightest_shape, zero_moment_shape
+
+    p = d.params
+    lines = ["Static shapes upright (rodctl.sim.statics): a rod curved at rest has no straight one; the zero-moment shape "
+             "is where a trim seeking no torque rests, the straightest is the floor of any controller at the base:"]
+    rigs = [("this rod", p)] if p["rod"]["rest_curvature"] != 0.0 else []
+    rigs.append(("the matrix's curved case", apply_overrides(p, CASES["curved"].plant_overrides)))
+    for name, q in rigs:
+        if clamped_ratio(q) >= 1.0:
+            lines.append(f"  {name} ({q['rod']['rest_curvature']:g} 1/m): past its clamped buckling length, no static "
+                         "shape near upright")
+            continue
+        try:
+            zero, best = zero_moment_shape(q), straightest_shape(q)
+        except ArithmeticError as e:
+            lines.append(f"  {name} ({q['rod']['rest_curvature']:g} 1/m): {e}")
+            continue
+        flag = f"  (past the {ROBUST_BAND_DEG:g} deg band: the matrix labels it)" if best.largest_deviation_deg > ROBUST_BAND_DEG else ""
+        lines.append(f"  {name} ({q['rod']['rest_curvature']:g} 1/m, hanging tip {1e3 * hanging_tip_offset_m(q):+.1f} mm with "
+                     f"the hub vertical): zero-moment {zero.largest_deviation_deg:.2f} deg; straightest "
+                     f"{best.largest_deviation_deg:.2f} deg, held by {1e3 * best.torque_Nm:+.2f} mN m{flag}")
+    g = trim_gains(d)
+    if g.target:
+        lines.append(f"  the trim holds this rod's straightest shape: {1e3 * g.target:+.2f} mN m, starting at "
+                     f"{math.degrees(g.start):+.2f} deg (gains/rodgains/trim.py, design statics at {STATICS_EDGES} edges)")
+    return lines
+
+
 def report_lines(d: Design) -> list[str]:
     p = d.params
     model, edges = p["plant"]["model"], p["plant"]["edges"]
@@ -171,7 +203,13 @@ def report_lines(d: Design) -> list[str]:
     elif unstable:
         lines.append(f"  every case the loop cannot hold linearly ({', '.join(unstable)}) is past its clamped buckling "
                      "length: the matrix labels those runs, it does not count them as passed")
+    lines += _curvature_lines(d)
     g = trim_gains(d)
+    if g.torque_per_offset and blind(p, g.torque_per_offset):
+        lines.append(f"Set-point trim (firmware/src/core/rod_trim.h): off: its {1e3 * g.band:g} mN m band is "
+                     f"{math.degrees(g.band / abs(g.torque_per_offset)):.1f} deg of zero error on this rod (G = "
+                     f"{g.torque_per_offset:.4g} N m/rad), past its {p['trim']['limit_deg']:g} deg range: the encoder's "
+                     "zero holds a rod this stiff (docs/control.md)")
     if g.rate:
         lines.append(f"Set-point trim (firmware/src/core/rod_trim.h): {p['trim']['time_constant']:g} s on the design model, "
                      f"G = {g.torque_per_offset:.4g} N m per rad of zero error; band {1e3 * g.band:g} mN m, the steady torque that "

@@ -148,8 +148,9 @@ KNOWN_FAILURES: dict[tuple[str, str], str] = {
     **{(c, t): _LINEARLY for c in ("E-15", "rho+15", "E-15,coulomb*0", "rho+15,coulomb*0") for t in TASKS},
     **{("L+3", t): "3 % longer: 0.97 x the clamped buckling length with the gearbox's play; it bends over"
        for t in TASKS},
-    **{("curved", t): "a rod curved at rest has no straight upright: its own zero-moment shape leans 6 deg "
-       "(docs/plant.md)" for t in TASKS},
+    **{("curved", t): "a rod curved at rest has no shape within 3 deg of upright: the straightest a steady base torque "
+       "holds (2.1 mN m) is 3.22 deg off, and its zero-moment shape, which the set-point trim finds, 6.07 deg "
+       "(rodctl.sim.statics; docs/control.md)" for t in TASKS},
 }
 # In-range runs (not KNOWN_FAILURES, rod short of its buckling length) the default design must pass, as
 # a share: with 0.5 to 1 deg of play the rod rests 2 to 2.9 deg off upright, near the 3 deg band
@@ -214,8 +215,10 @@ def scaled_overrides(p: Params, items) -> list[str]:
 
 
 def apply_overrides(p: Params, items) -> Params:
+    """p with a case's overrides. A case scales a checked file's values (E x0.85, viscous friction x3), so the
+    guard against typed unit slips does not apply: a rig at the edge of plausible keeps its cases."""
     items = scaled_overrides(p, items)
-    return p.with_overrides(*items) if items else p
+    return p.with_overrides(*items, plausible=False) if items else p
 
 
 def buckled_cases(plant: Params) -> dict[str, float]:
@@ -230,6 +233,24 @@ def buckled_cases(plant: Params) -> dict[str, float]:
         if ratio >= 1.0:
             out[name] = ratio
     return out
+
+
+def past_band_cases(plant: Params) -> dict[str, float]:
+    """The matrix cases whose rod has no static shape within the band of upright on this plant (a rod curved
+    at rest): case name -> the largest edge deviation of its straightest shape [deg] (rodctl.sim.statics). No
+    controller acting at the base holds such a rod within the band, so these cases measure the rod, not the
+    design."""
+    out = {}
+    for name, case in CASES.items():
+        dev = straightest_deg(apply_overrides(plant, case.plant_overrides))
+        if dev is not None and dev > ROBUST_BAND_DEG:
+            out[name] = dev
+    return out
+
+
+def past_band(row: dict) -> bool:
+    """Had this run's rod no static shape within the band (run_case's straightest_deg past it)?"""
+    return (row.get("straightest_deg") or 0.0) > ROBUST_BAND_DEG
 
 
 def buckled(row: dict) -> bool:
@@ -358,6 +379,20 @@ def _json_safe(d: dict) -> dict:
     return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
 
 
+def straightest_deg(plant: Params) -> float | None:
+    """How close to upright a steady base torque can hold this plant's rod: its straightest static shape's
+    largest edge deviation [deg]; 0 for a rod straight at rest, None for a curved one with no static shape near
+    upright (past its clamped buckling length: the buckling label says it)."""
+    if plant["rod"]["rest_curvature"] == 0.0:
+        return 0.0
+    from rodctl.sim.statics import straightest_shape
+
+    try:
+        return straightest_shape(plant).largest_deviation_deg
+    except ArithmeticError:
+        return None
+
+
 def run_case(params: Params, case: Case, task: str, *, extra_plant_overrides=(), seconds: float | None = None,
              progress: Callable[[str, float], None] | None = None, keep_log: bool = False,
              start_deg: float = BALANCE_START_DEG, plant_params: Params | None = None) -> dict[str, Any]:
@@ -370,7 +405,9 @@ def run_case(params: Params, case: Case, task: str, *, extra_plant_overrides=(),
 
     Returns a JSON-serializable dict: passed, case, task, criterion, settle_s, final_dev_deg, max_dev_deg,
     peak_torque_Nm, caught_at_s (swing-up), fault_reason (0 none), base_turns_max, est_rms_deg, plant,
-    buckling_ratio (the plant's rod above the hub over its clamped buckling length, rodgains.buckling).
+    buckling_ratio (the plant's rod above the hub over its clamped buckling length, rodgains.buckling),
+    straightest_deg (the largest edge deviation of the straightest static shape the plant's rod has upright:
+    0 for a straight rod, rodctl.sim.statics).
     Non-finite numbers are None. keep_log=True adds the raw log under "log" (not JSON-serializable).
     start_deg: where the balance task releases the rod, from upright [deg].
     """
@@ -387,7 +424,7 @@ def run_case(params: Params, case: Case, task: str, *, extra_plant_overrides=(),
     r = summarize(log, task, strict=case.strict)
     r = _json_safe(r)
     r.update(case=case.name, title=case.title, criterion=criterion(task, case.strict), plant=log["plant_label"],
-             buckling_ratio=clamped_ratio(plant_p))
+             buckling_ratio=clamped_ratio(plant_p), straightest_deg=straightest_deg(plant_p))
     if keep_log:
         r["log"] = log
     return r

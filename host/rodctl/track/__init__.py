@@ -22,6 +22,7 @@ from rodgains.errors import InputError
 from rodctl.track.align import SLOWDOWNS, Alignment, align
 from rodctl.track.compare import error_table, estimate_at, on_branch, settle_time
 from rodctl.track.markers import ColorRange, Detector
+from rodctl.track.rest_shape import RestShape, RestShapeError, measure_rest_shape, summary
 from rodctl.track.shape import (FILLED, GOOD, REPEATED, UNUSABLE, base_tangent, edge_angles, find_hub, place,
                                 rod_length_px, rod_markers, static_spots, stray_spots, to_world, without_strays)
 from rodctl.track.video import Video
@@ -58,6 +59,9 @@ class Tracked:
     settled_from_s: float | None = None
     roll_removed_rad: float = 0.0  # taken off every angle: the camera's roll, without a calibration [rad]
     warnings: list[str] = field(default_factory=list)  # one line each, printed on stderr by track()
+    # the rod's curvature at rest from the frames it hangs still (rodctl.track.rest_shape); None: not measured
+    rest_shape: RestShape | None = None
+    rest_note: str = ""  # one line: what to put in the parameter file, or why it was not measured
 
     def counts(self) -> dict[str, int]:
         return {name: int(np.sum(self.quality == q)) for name, q in
@@ -298,6 +302,15 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     settled = settle_time(t_log, np.asarray(data["mode_code"]))
     tracked = on_branch(np.where(ok[:, None], theta, np.nan), est)
     errors = error_table(t, tracked, est, settled)
+    # GOOD frames alone: a marker filled in from its neighbours is a spline's guess, and the curvature is the
+    # markers' departure from a rigid motion by a millimetre
+    try:
+        rest = measure_rest_shape(t, markers_m, quality == GOOD, t_log, np.asarray(data["mode_code"]),
+                                  np.asarray(data["encoder_count"]), p, cpr)
+        rest_note = summary(rest)
+    except RestShapeError as e:
+        rest = None
+        rest_note = f"rest curvature not measured: the hanging rod's model did not fit the still frames ({e})"
     if al.slowdown != 1.0 and filmed_fps is None and say is not None:
         say(f"slow motion: the file plays at {video.fps:g} fps, {al.slowdown:g} x slower than it was filmed "
             f"({video.fps * al.slowdown:g} fps); --fps gives the rate filmed")
@@ -307,8 +320,12 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     if view is None and say is not None:
         say(f"level: no --calibrate, so the camera's roll is taken to be the alignment's camera minus encoder "
             f"({np.degrees(roll):+.2f} deg) and is removed from every angle")
+    # Only a measurement is said: most videos have no still lead-in, and for a straight rod that needs no
+    # note each time; why it was not measured is Tracked.rest_note, which rodctl track prints
+    if rest is not None and say is not None:
+        say(rest_note)
     if warn is not None:
         for w in warnings:
             warn(w)
     return Tracked(str(video_path), video.fps * al.slowdown, F, hub_px, m_per_px, tau, t, tracked, markers_m, quality,
-                   al, est, errors, settled, roll, warnings)
+                   al, est, errors, settled, roll, warnings, rest, rest_note)

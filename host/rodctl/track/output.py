@@ -19,6 +19,18 @@ def columns(t: np.ndarray, tau: np.ndarray, theta: np.ndarray, markers_m: np.nda
     return cols
 
 
+def rest_shape_meta(rest, note: str = "") -> dict:
+    """The metadata entries of the rod's rest shape (rodctl.track.rest_shape.RestShape, or None: not measured, and
+    `note` says why); the names carry their units."""
+    if rest is None:
+        return {"rest_curvature_per_m": "not measured", "rest_note": note}
+    return {"rest_curvature_per_m": f"{rest.kappa_per_m:.4f}", "rest_tip_offset_m": f"{rest.tip_offset_m:.6f}",
+            "rest_still_s": f"{rest.still_from_s:.4f},{rest.still_to_s:.4f}", "rest_frames": rest.frames,
+            "rest_rms_residual_m": f"{rest.rms_residual_m:.6f}",
+            "rest_note": "rod.rest_curvature: positive when the hanging tip, the hub vertical, is toward increasing "
+                         "angles; from the longest still stretch, a rigid motion fitted out"}
+
+
 def write_parquet(path: Path, cols: dict, meta: dict) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq

@@ -233,10 +233,13 @@ def film(scene: RodScene, filming: Filming, t_truth: np.ndarray, theta_truth: np
 
 
 def simulate_filmed_run(params, path, *, swing_deg: float = 50.0, free_s: float = 3.0, armed_s: float = 5.0,
-                        after_s: float = 3.0):
-    """A run filmed as docs/howto/film-a-run.md says: the rod let go from `swing_deg` swings freely with
-    the driver off for `free_s` (the hand's swing that times the video), the board swings it up and
-    balances it for `armed_s`, then is disarmed and the rod falls and swings for `after_s`. Writes the telemetry log `path` (and its .truth.csv, as `rodctl sim --log` does);
+                        after_s: float = 3.0, still_s: float = 0.0):
+    """A run filmed as docs/howto/film-a-run.md says: the rod hangs still at rest for `still_s` [s] (default
+    none; its static shape, the hub vertical, the log DISARMED and the encoder still: what
+    rodctl.track.rest_shape measures the rest curvature from), then is let go from `swing_deg` [deg] and swings
+    freely with the driver off for `free_s` [s] (the hand's swing that times the video), the board swings it up
+    and balances it for `armed_s` [s], then is disarmed and the rod falls and swings for `after_s` [s]. Writes
+    the telemetry log `path` (and its .truth.csv, as `rodctl sim --log` does);
     returns (truth time [s], truth edge angles [rad] (T, plant edges), plant edge lengths [m])."""
     import math
     from types import SimpleNamespace
@@ -247,10 +250,13 @@ def simulate_filmed_run(params, path, *, swing_deg: float = 50.0, free_s: float 
     from rodctl.sim.scenarios import Trace
 
     pl = faithful_plant(params, input_mode="duty")
-    pl.set_state(math.radians(swing_deg))
     ctl = SilController(build_sil(params))
     dt = params.dt
-    parts = [run_closed_loop(pl, ctl, int(round(free_s / dt)), arm_mode=0, reset=True)]
+    parts = []
+    if still_s > 0:
+        parts.append(_hang_still(pl, ctl, params, int(round(still_s / dt))))
+    pl.set_state(math.radians(swing_deg))  # a hand lifts the rod between two control periods and lets go
+    parts.append(run_closed_loop(pl, ctl, int(round(free_s / dt)), arm_mode=0, reset=not parts))
     ctl.lib.rod_sil_arm(2)  # swing-up
     parts.append(run_closed_loop(pl, ctl, int(round(armed_s / dt)), reset=False))
     if after_s > 0:
@@ -263,6 +269,29 @@ def simulate_filmed_run(params, path, *, swing_deg: float = 50.0, free_s: float 
                   torque_cmd=log["torque_cmd"], node_arc=arc)
     write_log(SimpleNamespace(params=params, name="filmed"), trace, Path(path))
     return log["time"], log["theta"], np.diff(arc)
+
+
+def _hang_still(pl, ctl, params, periods: int) -> dict:
+    """The closed loop's log of `periods` control periods, disarmed from boot, with the rod `pl` hanging at rest in
+    its static shape (rodctl.sim.statics.hanging_nodes), the hub vertical and still.
+
+    The plant's Coulomb friction is smoothed (a slope through zero speed), so a curved rod's moment would make the
+    motor creep (0.13 deg/s for the matrix's 0.82 1/m: the encoder's count changed within the first second) and,
+    from the middle of the gearbox's play, first swing the rod across it (1.1 deg at the tip). A real
+    gearmotor's static friction holds the hub: here an external torque on the shaft, the static shape's own,
+    does (the hub then moved 0.013 deg in 2 s)."""
+    from rodctl.sim.plant import run_closed_loop
+    from rodctl.sim.statics import hanging_nodes
+
+    nodes = hanging_nodes(params)
+    pl.set_state(np.arctan2(np.diff(nodes[:, 0]), -np.diff(nodes[:, 1])))
+    q, _ = pl.raw_state()
+    # the generalized force on the hub's coordinate (the first) at rest: what holds it still, negated
+    pl.external_torque = -float(pl.force(np.concatenate([q, np.zeros(pl.n)]))[0])
+    try:
+        return run_closed_loop(pl, ctl, periods, arm_mode=0, reset=True)
+    finally:
+        pl.external_torque = 0.0
 
 
 TEST_SWING_AMPLITUDE = 0.012  # [N m]: a slow swing-up, so the base swings through the whole clip
