@@ -814,3 +814,75 @@ def test_a_pgf_figure_without_latex_is_refused_before_anything_is_written(tmp_pa
     assert capsys.readouterr().err == (f"rodctl: --out {tmp_path / 'p.pgf'}: a .pgf figure needs {tex} (LaTeX), "
                                        "which is not installed; use .pdf or .svg\n")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run.csv"]
+
+
+@pytest.mark.parametrize("override, line", [
+    ("plant.hub_length=0",
+     'rodctl: plant.hub_length: must be > 0 with plant.model = "der" (the rod\'s foot is clamped in a hub), got 0'),
+    ("motor.rotor_inertia=0", "rodctl: motor.rotor_inertia: must be > 0 with a compliant gearbox or no hub (the motor "
+     "side of the gear train needs its inertia), got 0"),
+])
+def test_a_value_the_faithful_plant_cannot_take_is_named_before_the_report(override, line):
+    """The ranges allow 0 (the paper's model has no hub and no motor), the faithful plant does not: the report
+    refuses before printing any of itself, and a simulation names the key too."""
+    r = run_rodctl("gains", "--report", "--set", override)
+    assert r.returncode == 2 and _one_line(r) == line and r.stdout == ""
+    r = run_rodctl("sim", "--scenario", "balance", "--no-plot", "--no-log", "--set", override, timeout=300)
+    assert r.returncode == 2 and r.stderr.strip().splitlines()[-1] == line
+
+
+def test_the_report_judges_a_rig_at_the_edge_of_plausible_on_its_scaled_cases():
+    """20000 kg/m^3 is plausible; the matrix's rho +15 % case of it, 23000, is past the guard against typed unit
+    slips, and is judged, not refused ("did you mean 230 kg/m^3?")."""
+    r = run_rodctl("gains", "--report", "--set", "rod.density=20000", timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "rho+15 " in r.stdout and "did you mean" not in r.stderr
+
+
+def test_a_loop_too_slow_for_the_rate_filter_is_refused_naming_both_keys(tmp_path):
+    """At 100 Hz the default 50 Hz tracking filter's sampled pole is 1 - 2 pi 50 / 100 = -2.1: the rate estimate
+    blows up and the board trips SPEED_LIMIT 20 ms after arming. The ceiling is the pole at 0."""
+    r = run_rodctl("gains", "--report", "--set", "loop.rate_hz=100")
+    assert r.returncode == 2 and _one_line(r) == ("rodctl: encoder.rate_bandwidth_hz: must be at most loop.rate_hz / (2 pi) "
+                                                  "= 15.9 [Hz], got 50.0: past it the sampled rate filter rings")
+    out = tmp_path / "d.json"
+    ok = run_rodctl("gains", "--json", str(out), "--set", "loop.rate_hz=100", "--set", "encoder.rate_bandwidth_hz=15")
+    assert ok.returncode == 0 and out.stat().st_size > 0, ok.stderr
+
+
+def test_a_run_that_faults_says_which_fault_and_when():
+    """The pass rule reads "no FAULT; ..."; a FAIL line alone left the fault to the events file."""
+    import numpy as np
+
+    from rodctl.cli.sim import summary_lines
+    from rodctl.sim.scenarios import MODE_BALANCE, MODE_FAULT, Outcome, Trace
+
+    t = np.arange(0.0, 1.0, 1e-3)
+    mode = np.where(t < 0.572, MODE_BALANCE, MODE_FAULT)
+    tr = Trace("firmware", t, np.full((t.size, 3), np.pi), np.zeros(t.size), 0.01, mode=mode, reason=2)
+    ok = Trace("held", t, np.full((t.size, 3), np.pi), np.zeros(t.size), 0.01, mode=np.full(t.size, MODE_BALANCE))
+    m = {"settle_s": 0.0, "overshoot_deg": 0.0, "peak_torque_Nm": 0.0, "swingup_s": float("nan"),
+         "est_rms_deg": float("nan"), "final_dev_deg": 0.0}
+    lines = summary_lines(Outcome("balance", "Balance", [tr, ok], {"firmware": m, "held": m}, False, "no FAULT", None))
+    assert lines[2] == "  firmware: FAULT ANGLE_LIMIT at 0.572 s" and not any("held: FAULT" in x for x in lines)
+
+
+@pytest.mark.parametrize("override, line", [
+    ("rod.length=NaN", "rodctl: rod.length: must be finite, got nan"),  # TOML spells it nan; a user may not
+    ("rod.length=-Inf", "rodctl: rod.length: must be finite, got -inf"),
+    ("rod.edges=true", "rodctl: rod.edges: expected an integer [-], got true"),  # the file's spelling, not Python's
+    ("motor.gear_ratio=5", "rodctl: swing_up.amplitude: must be in [0.001, 0.04964] N m, the firmware's torque "
+     "ceiling (set by driver.current_limit 1.7 A x the motor's torque at the output, motor.gear_ratio 5 x "
+     "torque_constant 0.01123 x gearbox_efficiency 0.52), got 0.05"),  # names the key the user did change
+])
+def test_a_value_is_named_as_the_user_wrote_it(override, line):
+    r = run_rodctl("gains", "--report", "--set", override)
+    assert r.returncode == 2 and _one_line(r) == line
+
+
+def test_a_missing_key_names_the_file(tmp_path):
+    f = tmp_path / "rod.toml"
+    text = run_rodctl("params").stdout
+    f.write_text("\n".join(x for x in text.splitlines() if not x.startswith("gravity")) + "\n")
+    r = run_rodctl("gains", "--params", str(f), "--check")
+    assert r.returncode == 2 and _one_line(r) == f"rodctl: {f}: rod.gravity: missing key [m/s^2]"

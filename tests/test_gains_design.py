@@ -317,3 +317,13 @@ def test_report_points_a_rod_past_the_critical_length_to_the_soft_shaft():
     soft = rodctl("gains", "--report", "--set", "rod.length=0.165", "--set", "lqr.q_shaft_angle=0")
     table_i = rodctl("gains", "--report")
     assert "NOTE: lqr.q_shaft_angle" not in soft.stdout + table_i.stdout
+
+
+def test_a_stable_loop_is_never_printed_as_radius_1():
+    """The tip IMU's gyro-bias state sits 9e-10 inside the unit circle: "1.000000" beside "stable" read as
+    marginal. The report adds decimals until a radius under 1 reads under 1."""
+    from rodgains.report import radius_text
+
+    assert radius_text(0.9999999991344952, 6) == "0.999999999"
+    assert radius_text(0.99953, 5) == "0.99953" and radius_text(1.002886, 6) == "1.002886"
+    assert radius_text(0.99996, 4) == "0.99996"

@@ -254,6 +254,12 @@ def _cross_checks(p: dict) -> list[tuple[str, str]]:
         out.append(("observer.process_noise_angle", "and process_noise_rate cannot both be 0"))
     if p["lqr"]["q_angle"] == 0 and p["lqr"]["q_rate"] == 0:
         out.append(("lqr.q_angle", "and q_rate cannot both be 0"))
+    ceiling = p["loop"]["rate_hz"] / (2.0 * math.pi)
+    if p["encoder"]["rate_bandwidth_hz"] > ceiling:
+        # the sampled tracking filter's double pole sits at 1 - 2 pi bandwidth / rate (rodgains.codegen
+        # rate_filter_gains): negative past this, so the rate estimate rings, and outside the unit circle at rate / pi
+        out.append(("encoder.rate_bandwidth_hz", f"must be at most loop.rate_hz / (2 pi) = {ceiling:.3g} [Hz], got "
+                    f"{p['encoder']['rate_bandwidth_hz']!r}: past it the sampled rate filter rings"))
     if p["plant"]["hub_length"] >= p["rod"]["length"]:
         out.append(("plant.hub_length", f"must be < rod.length = {p['rod']['length']:g} [m], got {p['plant']['hub_length']!r}"))
     try:
@@ -312,8 +318,9 @@ def check_firmware_limits(p: dict) -> list[tuple[str, str]]:
     torque_max = min(kt_out * drv["current_limit"], sa["torque_limit"])  # = Params.torque_max = ROD_TORQUE_MAX_NM
     lo, _ = _set_range("SWING_AMPLITUDE")
     if not lo <= sw["amplitude"] <= torque_max:
-        which = ("driver.current_limit * motor torque at the output" if torque_max < sa["torque_limit"]
-                 else "safety.torque_limit")
+        which = (f"driver.current_limit {drv['current_limit']:g} A x the motor's torque at the output, "
+                 f"motor.gear_ratio {m['gear_ratio']:g} x torque_constant {m['torque_constant']:g} x gearbox_efficiency "
+                 f"{m['gearbox_efficiency']:g}" if torque_max < sa["torque_limit"] else "safety.torque_limit")
         out.append(("swing_up.amplitude", f"must be in [{lo:g}, {torque_max:.4g}] N m, the firmware's torque "
                     f"ceiling (set by {which}), got {sw['amplitude']!r}"))
     # compared in radians, as the header holds them: f32 rounding keeps the order, so what passes
@@ -380,28 +387,33 @@ def _implausible(name: str, unit: str, value: float) -> str | None:
     return f"{value:g}{u} is not a testbed's (plausible: {lo:g} to {hi:g}{u}){hint}"
 
 
-def _coerce(name: str, key: Key, value: Any) -> Any:
+def _toml(value: Any) -> str:
+    """A value as the parameter file spells it (true, not Python's True)."""
+    return ("true" if value else "false") if isinstance(value, bool) else repr(value)
+
+
+def _coerce(name: str, key: Key, value: Any, plausible: bool = True) -> Any:
     kind = key.kind
     if kind is bool:
         if not isinstance(value, bool):
             raise ParamError(f"{name}: expected true or false, got {value!r}")
     elif kind is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ParamError(f"{name}: expected an integer [{key.unit}], got {value!r}")
+            raise ParamError(f"{name}: expected an integer [{key.unit}], got {_toml(value)}")
     elif kind is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ParamError(f"{name}: expected a number [{key.unit}], got {value!r}")
+            raise ParamError(f"{name}: expected a number [{key.unit}], got {_toml(value)}")
         value = float(value)
         if not math.isfinite(value):
             raise ParamError(f"{name}: must be finite, got {value!r}")
     elif kind is str:
         if not isinstance(value, str):
-            raise ParamError(f"{name}: expected a string, got {value!r}")
+            raise ParamError(f"{name}: expected a string, got {_toml(value)}")
     if key.check is not None:
         problem = key.check(value)
         if problem:
             raise ParamError(f"{name}: {problem} [{key.unit}], got {value!r}")
-    if name in PLAUSIBLE:
+    if plausible and name in PLAUSIBLE:
         problem = _implausible(name, key.unit, value)
         if problem:
             raise ParamError(f"{name} = {problem}")
@@ -420,6 +432,8 @@ def _parse_override(text: str) -> tuple[str, str, Any]:
         value = tomllib.loads(f"v = {raw.strip()}")["v"]
     except tomllib.TOMLDecodeError:
         value = raw.strip()  # bare words are strings: design.method=continuous
+        if value.lower().lstrip("+-") in ("nan", "inf", "infinity"):  # TOML spells them lower case only
+            value = float(value)
     return section, key, value
 
 
@@ -455,7 +469,9 @@ def _did_you_mean(section: str, key: str) -> str:
     return f" (it belongs in [{elsewhere[0]}])" if elsewhere else ""
 
 
-def validate(raw: dict, source: str = "parameters") -> dict:
+def validate(raw: dict, source: str = "parameters", plausible: bool = True) -> dict:
+    """The resolved parameters of a raw table; ParamError naming the key. plausible=False skips the guard against
+    unit slips (PLAUSIBLE), for values derived from a checked file rather than typed (the matrix's scaled cases)."""
     for section, table in raw.items():
         if section not in SCHEMA:
             raise ParamError(f"{source}: unknown section [{section}]")
@@ -474,10 +490,10 @@ def validate(raw: dict, source: str = "parameters") -> dict:
             name = f"{section}.{key}"
             if key not in raw.get(section, {}):
                 if spec.default is None:
-                    raise ParamError(f"{name}: missing key [{spec.unit}]")
+                    raise ParamError(f"{source}: {name}: missing key [{spec.unit}]")
                 out[section][key] = spec.default
                 continue
-            out[section][key] = _coerce(name, spec, raw[section][key])
+            out[section][key] = _coerce(name, spec, raw[section][key], plausible)
     for name, problem in _cross_checks(out):
         raise ParamError(f"{name}: {problem}")
     return out
@@ -608,14 +624,15 @@ class Params:
         """Hash of the resolved values: identical physics and weights give identical hashes."""
         return hashlib.sha256(self.canonical_json().encode()).hexdigest()
 
-    def with_overrides(self, *overrides: str) -> "Params":
+    def with_overrides(self, *overrides: str, plausible: bool = True) -> "Params":
+        """These parameters with "section.key=value" overrides; plausible=False: see validate."""
         raw = json.loads(self.canonical_json())
         for o in overrides:
             section, key, value = _parse_override(o)
             if section not in SCHEMA or key not in SCHEMA[section]:
                 raise ParamError(f"--set {section}.{key}: unknown key")
             raw[section][key] = value
-        return Params(validate(raw, source=self.source), source=self.source)
+        return Params(validate(raw, source=self.source, plausible=plausible), source=self.source)
 
     def with_counts_per_rev(self, counts: float) -> "Params":
         """These parameters on a rig whose encoder gives `counts` per output turn (a board's run-time

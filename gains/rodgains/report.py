@@ -114,6 +114,16 @@ def _clamped_line(p) -> str:
     return f"{head}; it buckles there at {margins_text(p)}"
 
 
+def radius_text(rho: float, places: int) -> str:
+    """A spectral radius to `places` decimals, or to as many as it takes not to print a stable loop as 1 (the tip
+    IMU's gyro-bias state sits 1e-9 inside the unit circle)."""
+    text = f"{rho:.{places}f}"
+    while rho < 1.0 and float(text) >= 1.0 and places < 12:
+        places += 1
+        text = f"{rho:.{places}f}"
+    return text
+
+
 def report_text(d: Design) -> str:
     p = d.params
     rod = d.rod
@@ -153,9 +163,9 @@ def report_text(d: Design) -> str:
         f"  L = [{', '.join(f'{v:.4g}' for v in d.L.ravel())}]  rad, rad/s per rad of encoder innovation",
         f"  controller poles (slowest, as ln z / dt): {_poles(ctrl, d.dt)} rad/s",
         f"  observer poles   (slowest, as ln z / dt): {_poles(obs, d.dt)} rad/s",
-        f"  closed-loop spectral radius (plant + observer + LQR): {d.checks['closed_loop_spectral_radius']:.6f}",
+        f"  closed-loop spectral radius (plant + observer + LQR): {radius_text(d.checks['closed_loop_spectral_radius'], 6)}",
         f"  stable for actuator gain in [{lo:.3g}, {hi:.3g}]; phase margin {pm:.1f} deg at the plant input",
-        f"  with one extra period of delay: spectral radius {one_period_delay_radius(d):.4f}",
+        f"  with one extra period of delay: spectral radius {radius_text(one_period_delay_radius(d), 4)}",
         f"  one encoder count ({np.degrees(rad_per_count):.3f} deg) moves the torque by "
         f"{abs((d.K @ d.L).item()) * rad_per_count * 1e3:.3g} mN m",
         f"  least damped loop mode: {ring_hz:.3g} Hz, damping ratio {ring_zeta:.3f}"

@@ -87,6 +87,12 @@ def run_gains(args) -> int:
         for f in (header, header.with_suffix(".toml")):
             check_regenerable(f, "--header", force=args.force, inputs=(args.params,))
     d, files = generated_files(args)
+    if args.report:  # the report ends on the faithful plant: refuse before printing half of it
+        from rodctl.sim.plant import faithful_problem
+
+        problem = faithful_problem(d.params)
+        if problem:
+            raise InputError(problem)
     warning = buckling_warning(d.params)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)

@@ -38,10 +38,24 @@ class Progress:
             sys.stderr.flush()
 
 
+def _fault_of(tr) -> tuple[str, float]:
+    """(the reason's name, when [s]) of a run that ended in FAULT, else ("", 0): the pass rule's "no FAULT" is
+    the criterion, and a run that broke it says so and why."""
+    from rodctl.link import protocol as P
+    from rodctl.sim.scenarios import MODE_FAULT
+
+    if not tr.fell:
+        return "", 0.0
+    at = float(tr.t[int((tr.mode == MODE_FAULT).argmax())])
+    names = {int(r): r.name for r in P.Reason}
+    return names.get(int(tr.reason), f"reason {int(tr.reason)}"), at
+
+
 def summary_lines(o) -> list[str]:
     from rodctl.sim.figures import fmt
 
     lines = [f"{o.name}: {o.title}", f"  {'PASS' if o.passed else 'FAIL'}: {o.criterion}"]
+    lines += [f"  {tr.label}: FAULT {fault} at {at:.3f} s" for tr in o.traces for fault, at in [_fault_of(tr)] if fault]
     head = f"  {'run':22s} {'settle<1deg [s]':>15s} {'overshoot [deg]':>15s} {'peak |u| [N m]':>14s} " \
            f"{'swing-up [s]':>12s} {'est. err [deg]':>14s} {'final [deg]':>11s}"
     lines.append(head)

@@ -63,7 +63,7 @@ def window(overrides=(), frictions=FRICTIONS, seconds: float = 30.0, jobs: int =
 
 def main(argv=None) -> int:
     from rodctl.cli import OneLineParser
-    from rodctl.sim.matrix import ROBUST_BAND_DEG, TASKS, apply_overrides
+    from rodctl.sim.matrix import ROBUST_BAND_DEG, TASKS, scaled_overrides
 
     ap = OneLineParser(prog="python -m rodctl.sim.friction_study", description=__doc__.split("\n")[0])
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
@@ -90,8 +90,8 @@ def main(argv=None) -> int:
         problem = f"--jobs {a.jobs}: at least 1"
     try:
         p = load_params(None, list(a.set))
-        for f in frictions:  # every plant the runs would make, refused here rather than in a worker
-            apply_overrides(p, (f"motor.coulomb_friction*={f}",))
+        for f in frictions:  # every plant the runs would make, refused here rather than in a worker; the multiples
+            p.with_overrides(*scaled_overrides(p, (f"motor.coulomb_friction*={f}",)))  # are typed: unit slips too
     except UserError as e:
         problem = problem or str(e)
     if problem:

@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from rodgains.errors import UserError
+from rodgains.errors import InputError, UserError
 from rodgains.der_model import DERModel
 from rodgains.params import Params, load_params
 from rodgains.rod_model import DAMPING_REFERENCE_EDGES, RodModel
@@ -747,11 +747,26 @@ def hub_geometry(p: Params, edges: int, hub_length: float, d: float | None = Non
                 hub_stiffness=2.0 * p.EI / l, hub_damping=2.0 * c / l)
 
 
+def faithful_problem(params: Params) -> str | None:
+    """Why the parameter file cannot make its faithful plant, in one line naming the key, or None. The parameter
+    ranges allow 0 for these because other plants (the paper's model without hub or motor) use them."""
+    if params["plant"]["model"] == "der" and params["plant"]["hub_length"] == 0:
+        return 'plant.hub_length: must be > 0 with plant.model = "der" (the rod\'s foot is clamped in a hub), got 0'
+    if params["motor"]["rotor_inertia"] == 0 and (params["gearbox"]["model"] == "compliant" or params["plant"]["hub_length"] == 0):
+        return ('motor.rotor_inertia: must be > 0 with a compliant gearbox or no hub (the motor side of the gear train '
+                'needs its inertia), got 0')
+    return None
+
+
 def faithful_plant(params: Params, *, input_mode: str = "duty", phase: float = 0.5, **kw) -> Plant:
     """The plant the parameter file's [plant] table describes (model, edges, hub_length), with the
     physical motor (rotor inertia, viscous and Coulomb friction, inductance), the [gearbox] between the
     motor and the rod, the encoder's zero error, the rod's rest curvature and the interrupt's jitter:
-    what every pass/fail scenario judges (docs/plant.md). Keyword arguments override Plant's."""
+    what every pass/fail scenario judges (docs/plant.md). Keyword arguments override Plant's.
+    InputError (one line naming the key) when the file cannot make it (faithful_problem)."""
+    problem = faithful_problem(params)
+    if problem:
+        raise InputError(problem)
     pp = params["plant"]
     args = dict(kind=pp["model"], edges=pp["edges"], input_mode=input_mode, phase=phase,
                 hub_length=pp["hub_length"], coulomb=params["motor"]["coulomb_friction"],
