@@ -19,7 +19,7 @@ SHOWN_STILL_S = 0.45  # of which the video shows the last [s]
 # 2400 px/m: the rod 372 px long. At 1600 (250 px, the least docs/howto/film-a-run.md allows) the codec's
 # colour errors, 0.1 to 0.3 px on each marker, put the curvature up to 0.09 1/m off
 SCENE = dict(width=640, height=440, px_per_m=2400.0, hub_px=(320.0, 40.0))
-TOLERANCE_PER_M = 0.1  # a file 0.4 1/m off the rod costs it little lean, the wrong sign 16.9 deg (docs/control.md)
+TOLERANCE_PER_M = 0.1  # a file 0.4 1/m off the rod costs it little lean, the wrong sign 16.9 deg on the 0.82 1/m rod (docs/control.md)
 CASES = {"curved": (0.82, STILL_S), "curved_back": (-0.82, STILL_S), "straight": (0.0, STILL_S),
          "no_lead_in": (0.82, 0.0)}
 
@@ -119,6 +119,28 @@ def test_a_model_that_does_not_converge_is_a_line_not_a_traceback(runs, monkeypa
     assert r.rest_note == ("rest curvature not measured: the hanging rod's model did not fit the still frames (no "
                            "static shape found with the hub 0 deg from upright)")
     assert not any("rest" in s for s in said), said
+
+
+def test_a_shape_the_hanging_rod_does_not_explain_is_not_put_in_a_file(runs, monkeypatch):
+    """A hand on the rod, a marker mistaken: the markers 0.8 mm RMS from the best hanging shape (the tests' fits:
+    0.13 mm) say nothing about rod.rest_curvature, whose wrong sign costs 16.9 deg on the matrix's rod."""
+    from rodctl.track import rest_shape
+
+    monkeypatch.setattr(rest_shape, "fit_rest_curvature", lambda *a, **k: (0.8, np.zeros(3), 0.8e-3))
+    r, said, _ = tracked(runs["curved"])
+    assert r.rest_shape is None and r.rest_note.endswith("(its markers are 0.80 mm RMS from the hanging rod's best "
+                                                         "shape, more than 0.4 mm)")
+    assert not any("rest curvature" in s for s in said), said
+
+
+def test_a_file_the_plant_cannot_be_made_of_still_tracks(runs):
+    """The rest shape needs the plant's rod; the tracking does not: a file the faithful plant refuses (no hub on
+    the der plant) is a note, and the video is tracked."""
+    from rodctl.track import track
+
+    d = runs["straight"]
+    r = track(d["video"], d["log"], d["params"].with_overrides("plant.hub_length=0.0"), say=None, warn=None)
+    assert r.rest_shape is None and "plant.hub_length: must be > 0" in r.rest_note and len(r.errors) == 8
 
 
 @pytest.mark.parametrize("name", ["curved", "no_lead_in"])

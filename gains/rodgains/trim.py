@@ -15,6 +15,7 @@ import numpy as np
 
 from . import sampled
 from .buckling import clamped_ratio
+from .errors import ParamError
 
 
 class TrimGains(NamedTuple):
@@ -54,8 +55,8 @@ def straightest_shape(params) -> StraightestShape:
     Linear statics about upright of the rod at STATICS_EDGES edges: within 0.04 mN m of the faithful
     plant's nonlinear statics on the matrix's curved rod (rodctl.sim.statics)."""
     kappa = params["rod"]["rest_curvature"]
-    if kappa == 0.0 or clamped_ratio(params) >= 1.0:  # straight, or no static shape near upright to aim at
-        return StraightestShape(0.0, 0.0)
+    if kappa == 0.0 or params["rod"]["gravity"] == 0.0 or clamped_ratio(params) >= 1.0:
+        return StraightestShape(0.0, 0.0)  # straight, no upright to prefer, or no static shape near it
     from .rod_model import RodModel
 
     m = RodModel.from_params(params, edges=STATICS_EDGES)
@@ -119,8 +120,13 @@ def trim_gains(d) -> TrimGains:
                          gate=math.radians(t["gate_deg"]), limit=math.radians(t["limit_deg"]), torque_per_offset=0.0)
     G = static_torque_per_offset(d)
     on = t["time_constant"] > 0 and abs(G) > 1e-9 and not blind(d.params, G)
-    aim = straightest_shape(d.params) if on else StraightestShape(0.0, 0.0)
+    # a trim that does not walk still starts where the rod stands straightest: knowledge of the rod, not a search
+    aim = straightest_shape(d.params)
+    if abs(aim.hub) > math.radians(t["limit_deg"]):  # the linear statics are about upright; so is the trim
+        raise ParamError(f"rod.rest_curvature: {d.params['rod']['rest_curvature']:g} 1/m puts the straightest upright "
+                         f"shape's hub {math.degrees(aim.hub):+.1f} deg off upright, past trim.limit_deg "
+                         f"{t['limit_deg']:g} (raise it to hold a rod this curved, which leans at least as far)")
     return TrimGains(hold_k=1.0 - math.exp(-d.dt / t["hold_time_constant"]),
                      rate=d.dt / (G * t["time_constant"]) if on else 0.0, band=band_nm(d.params),
                      gate=math.radians(t["gate_deg"]), limit=math.radians(t["limit_deg"]), torque_per_offset=G,
-                     target=aim.torque, start=aim.hub)
+                     target=aim.torque if on else 0.0, start=aim.hub)

@@ -77,7 +77,7 @@ typedef struct {
 
     /* balance */
     rod_observer_t obs;
-    rod_trim_t trim; /* where the rod stands upright, found from the torque (rod_trim.h) */
+    rod_trim_t trim; /* where the rod stands upright (or straightest), found from the torque (rod_trim.h) */
     rod_swingup_t swing;
     int32_t upright_turn; /* the upright being balanced: pi + 2 pi upright_turn */
     rod_runaway_t runaway; /* the sign watch of a driving mode's first second */

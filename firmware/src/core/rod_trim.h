@@ -38,11 +38,12 @@ extern "C" {
 #endif
 
 typedef struct {
-    float trim; /* encoder angle of the rod's upright, relative to the encoder's [rad] */
+    float trim; /* encoder angle of the balance's set-point (the rod's upright, or its straightest shape's hub),
+                 * relative to the encoder's upright [rad] */
     float hold; /* low-passed torque the balance gave, friction compensation included [N m] */
 } rod_trim_t;
 
-/* Power-on: no trim. */
+/* Power-on: the trim at ROD_TRIM_START_RAD (0 but for a rod curved at rest). */
 void rod_trim_init(rod_trim_t *t);
 
 /* A new balance (the catch): the steady torque is the new balance's; the trim is the rig's and stays. */

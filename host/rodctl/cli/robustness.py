@@ -55,7 +55,7 @@ def _fmt(v, nd=2) -> str:
 
 def table_lines(rows: list[dict]) -> list[str]:
     """A line per case (both tasks side by side); Monte Carlo plants summed up at the end."""
-    from rodctl.sim.matrix import ROBUST_BAND_DEG, TASKS, buckled, past_band
+    from rodctl.sim.matrix import ROBUST_BAND_DEG, TASKS, buckled, marks, past_band
 
     def cell(r):
         if r is None:
@@ -69,7 +69,7 @@ def table_lines(rows: list[dict]) -> list[str]:
             by.setdefault(r["case"], {})[r["task"]] = r
     past = {name: r["buckling_ratio"] for name, d in by.items() for r in d.values() if buckled(r)}
     bent = {name: r["straightest_deg"] for name, d in by.items() for r in d.values() if past_band(r)}
-    names = {name: name + (" ^" if name in past else "") + (" ~" if name in bent else "") for name in by}
+    names = {name: name + marks(next(iter(d.values()))) for name, d in by.items()}
     w = max([14, *map(len, names.values())])  # the case column as wide as its longest name
     lines = [f"  {'':{w}s}" + "".join(f" | {t:^28s}" for t in TASKS),
              f"  {'case':{w}s}" + "".join(f" | {'settle s':>9s} {'end deg':>9s} {'result':>8s}" for _ in TASKS)]

@@ -141,6 +141,12 @@ def run_sim(args) -> int:
     for name in names:
         if name not in SCENARIOS:
             raise InputError(f"unknown scenario {name!r}; one of: {', '.join(SCENARIOS)} (rodctl sim --list)")
+    if any(SCENARIOS[n].group != "paper" for n in names):  # the faithful plant's: refused before a compile
+        from rodctl.sim.plant import faithful_problem
+
+        problem = faithful_problem(params)
+        if problem:
+            raise InputError(problem)
     if args.all and args.readme:  # before every scenario has run, not after
         check_table_page(Path(args.readme))
     outcomes, unexpected = [], []

@@ -54,7 +54,7 @@ def heatmap_figure(rows: list[dict], title: str):
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import ListedColormap, Normalize
 
-    from rodctl.sim.matrix import buckled, past_band
+    from rodctl.sim.matrix import marks
 
     tasks = list(dict.fromkeys(r["task"] for r in rows))
     height = max(len([r for r in rows if r["task"] == t]) for t in tasks)
@@ -90,8 +90,7 @@ def heatmap_figure(rows: list[dict], title: str):
         ax.set_xticks(np.arange(len(cols) + 1) + 0.5)
         ax.set_xticklabels(["result"] + [c[1] for c in cols], rotation=35, ha="right", fontsize=7)
         ax.set_yticks(np.arange(len(sub)) + 0.5)
-        ax.set_yticklabels([r["case"] + (" ^" if buckled(r) else "") + (" ~" if past_band(r) else "") for r in sub],
-                           fontsize=7)
+        ax.set_yticklabels([r["case"] + marks(r) for r in sub], fontsize=7)
         ax.tick_params(length=0)
         n_pass = sum(1 for r in sub if r.get("passed"))
         ax.set_title(f"{task}: {n_pass}/{len(sub)} pass", fontsize=9)

@@ -131,7 +131,7 @@ def corner_radii(d: Design) -> list[Corner]:
     return out
 
 
-def _curvature_lines(d: Design) -> list[str]:
+def _curvature_lines(d: Design, g) -> list[str]:
     """How near upright a steady base torque can hold the rod if it is curved at rest, what the trim holds, and the
     matrix's curved case on this rig (rodctl.sim.statics)."""
     from rodctl.sim.matrix import CASES, ROBUST_BAND_DEG, apply_overrides
@@ -156,10 +156,12 @@ def _curvature_lines(d: Design) -> list[str]:
         lines.append(f"  {name} ({q['rod']['rest_curvature']:g} 1/m, hanging tip {1e3 * hanging_tip_offset_m(q):+.1f} mm with "
                      f"the hub vertical): zero-moment {zero.largest_deviation_deg:.2f} deg; straightest "
                      f"{best.largest_deviation_deg:.2f} deg, held by {1e3 * best.torque_Nm:+.2f} mN m{flag}")
-    g = trim_gains(d)
     if g.target:
         lines.append(f"  the trim holds this rod's straightest shape: {1e3 * g.target:+.2f} mN m, starting at "
                      f"{math.degrees(g.start):+.2f} deg (gains/rodgains/trim.py, design statics at {STATICS_EDGES} edges)")
+    elif g.start:
+        lines.append(f"  the set-point is this rod's straightest shape's hub, {math.degrees(g.start):+.2f} deg (the trim is "
+                     "off: it seeks no torque)")
     return lines
 
 
@@ -203,8 +205,8 @@ def report_lines(d: Design) -> list[str]:
     elif unstable:
         lines.append(f"  every case the loop cannot hold linearly ({', '.join(unstable)}) is past its clamped buckling "
                      "length: the matrix labels those runs, it does not count them as passed")
-    lines += _curvature_lines(d)
     g = trim_gains(d)
+    lines += _curvature_lines(d, g)
     if g.torque_per_offset and blind(p, g.torque_per_offset):
         lines.append(f"Set-point trim (firmware/src/core/rod_trim.h): off: its {1e3 * g.band:g} mN m band is "
                      f"{math.degrees(g.band / abs(g.torque_per_offset)):.1f} deg of zero error on this rod (G = "

@@ -253,6 +253,12 @@ def past_band(row: dict) -> bool:
     return (row.get("straightest_deg") or 0.0) > ROBUST_BAND_DEG
 
 
+def marks(row: dict) -> str:
+    """What a table or figure appends to a run's case name: " ^" past the buckling length, " ~" no shape within the
+    band (their footnotes: rodctl.cli.robustness.table_lines)."""
+    return (" ^" if buckled(row) else "") + (" ~" if past_band(row) else "")
+
+
 def buckled(row: dict) -> bool:
     """Was this run's rod past its clamped buckling length (run_case's buckling_ratio >= 1)? A refused
     design's row has no ratio."""

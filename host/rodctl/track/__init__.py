@@ -17,14 +17,14 @@ from typing import Callable
 
 import numpy as np
 
-from rodgains.errors import InputError
+from rodgains.errors import InputError, UserError
 
 from rodctl.track.align import SLOWDOWNS, Alignment, align
 from rodctl.track.compare import error_table, estimate_at, on_branch, settle_time
 from rodctl.track.markers import ColorRange, Detector
 from rodctl.track.rest_shape import RestShape, RestShapeError, measure_rest_shape, summary
 from rodctl.track.shape import (FILLED, GOOD, REPEATED, UNUSABLE, base_tangent, edge_angles, find_hub, place,
-                                rod_length_px, rod_markers, static_spots, stray_spots, to_world, without_strays)
+                                rod_length_px, rod_markers, rotate, static_spots, stray_spots, to_world, without_strays)
 from rodctl.track.video import Video
 
 REPEAT_SHARE = 0.3  # markers moving less than this share of the step the motion around them predicts: a repeat
@@ -192,15 +192,6 @@ def to_plane(pos_px: np.ndarray, hub_px: np.ndarray, view) -> tuple[np.ndarray, 
     return plane.reshape(pos_px.shape), float(np.sqrt(abs(np.linalg.det(view.H[:2, :2]))))
 
 
-def rotate(markers_m: np.ndarray, angle_rad: float) -> np.ndarray:
-    """The markers [m] turned counter-clockwise by angle_rad about the axis: every edge angle grows by it."""
-    c, s = np.cos(angle_rad), np.sin(angle_rad)
-    out = np.empty_like(markers_m)
-    out[..., 0] = c * markers_m[..., 0] - s * markers_m[..., 1]
-    out[..., 1] = s * markers_m[..., 0] + c * markers_m[..., 1]
-    return out
-
-
 def _print_warning(text: str) -> None:
     print(f"rodctl: warning: {text}", file=sys.stderr)
 
@@ -308,7 +299,7 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
         rest = measure_rest_shape(t, markers_m, quality == GOOD, t_log, np.asarray(data["mode_code"]),
                                   np.asarray(data["encoder_count"]), p, cpr)
         rest_note = summary(rest)
-    except RestShapeError as e:
+    except (RestShapeError, UserError) as e:  # the file cannot make the plant's rod: the tracking still stands
         rest = None
         rest_note = f"rest curvature not measured: the hanging rod's model did not fit the still frames ({e})"
     if al.slowdown != 1.0 and filmed_fps is None and say is not None:

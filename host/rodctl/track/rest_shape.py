@@ -3,7 +3,8 @@
     rest = measure_rest_shape(t_s, markers_m, usable, t_log, mode, count, params, cpr)  # RestShape or None
 
 A rod curved at rest needs its curvature in the parameter file, with the right sign: the design then holds its
-straightest shape upright (docs/control.md, "A rod curved at rest"); the wrong sign costs 16.9 deg of lean. The
+straightest shape upright (docs/control.md, "A rod curved at rest"); on the matrix's 0.82 1/m rod the wrong sign
+costs 16.9 deg of lean. The
 curvature is defined on the rod hanging at rest with its hub vertical, positive when the hanging tip is offset
 toward increasing encoder angles. The video, once aligned with the log (mirror and roll taken off by
 rodctl.track), already sees the rod in the encoder's sense, so the sign comes with the measurement.
@@ -20,6 +21,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+
+from rodctl.track.shape import rotate
 
 MODE_DISARMED = 0  # the log's mode_code with the driver off (rodctl.logs.schema)
 # A still rod whose encoder is farther than this from hanging (less whole turns) is not hanging but resting on
@@ -40,6 +43,10 @@ KAPPA_STEP_PER_M = 0.05  # the difference step of the shape's derivative in the 
 MAX_KAPPA_PER_M = 20.0  # the parameter file's own limit (a radius of 5 cm): the fit stops there [1/m]
 FIT_ITERATIONS = 12
 CONVERGED_PER_M = 1e-5  # a curvature step smaller than this ends the fit [1/m]
+# A fit whose markers sit farther than this from the measured ones, RMS, is not the hanging rod's shape (a hand
+# on it, a marker mistaken): said as not measured rather than put in a file where the wrong sign costs 16.9 deg
+# on the matrix's rod. The tests' fits: 0.12 to 0.13 mm; the matrix's curvature moves the markers about 1 mm [m].
+MAX_RESIDUAL_M = 0.4e-3
 
 
 class RestShape(NamedTuple):
@@ -124,11 +131,6 @@ def _holds_still(t_s: np.ndarray, markers_m: np.ndarray, tol_m: float) -> np.nda
     return np.max(np.hypot(d[..., 0], d[..., 1]), axis=1) <= tol_m
 
 
-def _rotate(xy: np.ndarray, angle_rad: float) -> np.ndarray:
-    c, s = np.cos(angle_rad), np.sin(angle_rad)
-    return np.column_stack([c * xy[:, 0] - s * xy[:, 1], s * xy[:, 0] + c * xy[:, 1]])
-
-
 class _Model:
     """The faithful plant's hanging rod's marker points [m] (markers, 2), axis left out, for a rest curvature."""
 
@@ -172,21 +174,24 @@ def fit_rest_curvature(mean_m: np.ndarray, params, hub_deg: float = 0.0) -> tupl
     m = model(kappa)
     across = np.tile([1.0, 0.0], len(target))
     along = np.tile([0.0, 1.0], len(target))
+    converged = False
     for _ in range(FIT_ITERATIONS):
         h = -KAPPA_STEP_PER_M if kappa > 0 else KAPPA_STEP_PER_M  # toward 0: within the file's limit
         dm = (model(kappa + h) - m) / h
-        p = _rotate(m, motion[0])
+        p = rotate(m, motion[0])
         r = (p + motion[1:] - target).ravel()
-        J = np.column_stack([_rotate(dm, motion[0]).ravel(), np.column_stack([-p[:, 1], p[:, 0]]).ravel(),
+        J = np.column_stack([rotate(dm, motion[0]).ravel(), np.column_stack([-p[:, 1], p[:, 0]]).ravel(),
                              across, along])
         step = np.linalg.lstsq(J, -r, rcond=None)[0]
         new = float(np.clip(kappa + step[0], -MAX_KAPPA_PER_M, MAX_KAPPA_PER_M))
-        done = abs(new - kappa) < CONVERGED_PER_M
+        converged = abs(new - kappa) < CONVERGED_PER_M
         kappa, motion = new, motion + step[1:]
         m = model(kappa)
-        if done:
+        if converged:
             break
-    res = _rotate(m, motion[0]) + motion[1:] - target
+    if not converged or abs(kappa) >= MAX_KAPPA_PER_M:
+        raise RestShapeError(f"the fit did not settle on a curvature within {MAX_KAPPA_PER_M:g} 1/m")
+    res = rotate(m, motion[0]) + motion[1:] - target
     return kappa, motion, float(np.sqrt(np.mean(np.sum(res ** 2, axis=1))))
 
 
@@ -213,6 +218,9 @@ def measure_rest_shape(t_s: np.ndarray, markers_m: np.ndarray, usable: np.ndarra
         tip = hanging_tip_offset_m(_with_kappa(params, kappa))
     except ArithmeticError as e:
         raise RestShapeError(str(e)) from None
+    if rms > MAX_RESIDUAL_M:
+        raise RestShapeError(f"its markers are {rms * 1e3:.2f} mm RMS from the hanging rod's best shape, more than "
+                             f"{MAX_RESIDUAL_M * 1e3:g} mm")
     return RestShape(kappa, tip, float(t_s[frames[0]]), float(t_s[frames[-1]]), len(frames), rms)
 
 

@@ -280,3 +280,12 @@ def base_tangent(pos_m: np.ndarray, length: float) -> np.ndarray:
     dx = pos_m[:, :k, 0] @ pinv[0]
     dy = pos_m[:, :k, 1] @ pinv[0]
     return np.arctan2(dx, -dy)
+
+
+def rotate(markers_m: np.ndarray, angle_rad: float) -> np.ndarray:
+    """The markers [m] turned counter-clockwise by angle_rad about the axis: every edge angle grows by it."""
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    out = np.empty_like(markers_m)
+    out[..., 0] = c * markers_m[..., 0] - s * markers_m[..., 1]
+    out[..., 1] = s * markers_m[..., 0] + c * markers_m[..., 1]
+    return out
