@@ -84,3 +84,14 @@ def test_none_still_judges_the_nominal_goals(cases, monkeypatch):
 
     v = V.judge(load_params(), cases, runner=FakeRunner())
     assert seen == ["nominal", "nominal"] and v.cases == "nominal" and v.nominal_met
+
+
+def test_a_rod_with_no_shape_within_the_band_is_told_so_and_no_share_is_made_up():
+    """A rod curved so that its straightest upright shape is 3.22 deg off: every run is past the band, none is in
+    range, and the first step names the rod, not the weights."""
+    rows = [dict(row("nominal", t, False, final=3.4), straightest_deg=3.22) for t in ("balance", "swingup")]
+    v = V.from_rows(rows, load_params(), "nominal")
+    text = v.lines("f.toml")
+    assert text[1] == "  matrix (nominal): 0/2 runs passed; none in range" and not v.ready
+    first = next(ln for ln in text if ln.startswith("  next: "))
+    assert first.startswith("  next: the rod is curved at rest: its straightest static shape upright is 3.22 deg off")

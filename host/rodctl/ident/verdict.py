@@ -41,6 +41,7 @@ class Verdict:
     play_deg: float  # the identified gearbox play between the encoder and the rod (Params.encoder_play_deg) [deg]
     tip_imu: bool  # the design reads the tip IMU (sensors.tip_imu)
     failed: tuple[str, ...]  # "case/task" of every in-range run that failed
+    straightest_deg: float = 0.0  # the rod's straightest static shape's largest deviation (curved at rest) [deg]
 
     @property
     def nominal_met(self) -> bool:
@@ -78,10 +79,16 @@ class Verdict:
 
     def next_steps(self, out: str) -> list[str]:
         """What to try, most structural first."""
+        from rodctl.sim.matrix import ROBUST_BAND_DEG
+
         steps = []
         if self.buckling_ratio >= 1.0:
             steps.append(f"the rod is {self.buckling_ratio:.3f} x its clamped buckling length: it bends over whenever "
                          "the shaft holds still, and no gains change that; use a shorter or stiffer rod")
+        if self.straightest_deg > ROBUST_BAND_DEG:
+            steps.append(f"the rod is curved at rest: its straightest static shape upright is {self.straightest_deg:.2f} "
+                         f"deg off, past the {ROBUST_BAND_DEG:g} deg band, and no gains change that; use a straighter rod "
+                         "(docs/control.md, \"A rod curved at rest\")")
         if not self.nominal_met and self.play_deg >= PLAY_FIRST_DEG:
             steps.append(f"the gearbox's play ({self.play_deg:.2f} deg identified) lies between the motor's "
                          "encoder and the rod, which leans on a flank the encoder cannot see: measure the rod side "
@@ -111,8 +118,9 @@ class Verdict:
                        f"{100 * MIN_PASS_SHARE:.0f} %")
         text = [f"verdict: {head}" + (f": {'; '.join(why)}" if why else "")
                 + f" (the design in {out} on the identified rig, gearbox included)",
-                f"  matrix ({self.cases}): {self.passed}/{self.runs} runs passed; in range {self.in_range_passed}/"
-                f"{self.in_range_runs} ({100 * self.in_range_share:.0f} %, needed {100 * MIN_PASS_SHARE:.0f} %)"]
+                f"  matrix ({self.cases}): {self.passed}/{self.runs} runs passed; "
+                + (f"in range {self.in_range_passed}/{self.in_range_runs} ({100 * self.in_range_share:.0f} %, needed "
+                   f"{100 * MIN_PASS_SHARE:.0f} %)" if self.in_range_runs else "none in range")]
         text += [f"  nominal {self.nominal_text(t)}" for t in ("balance", "swingup")]
         if self.failed and not self.ready:
             shown = ", ".join(self.failed[:8]) + (f" and {len(self.failed) - 8} more" if len(self.failed) > 8 else "")
@@ -134,7 +142,7 @@ def from_rows(rows: list[dict], params: Params, cases: str) -> Verdict:
                    in_range_passed=len(in_range) - len(failed), in_range_runs=len(in_range), nominal=nominal,
                    buckling_ratio=clamped_ratio(params),
                    play_deg=params.encoder_play_deg, tip_imu=params["sensors"]["tip_imu"],
-                   failed=failed)
+                   failed=failed, straightest_deg=max((r.get("straightest_deg") or 0.0 for r in nominal.values()), default=0.0))
 
 
 def judge(params: Params, cases: str = "matrix", *, runner=None, jobs: int | None = None,
