@@ -41,7 +41,7 @@ def test_the_zero_moment_shape_is_where_the_plant_rests():
     fam = statics._Family(CURVED)
     fam.shape(z.hub_deg)
     pl = faithful_plant(CURVED.with_overrides("rod.damping=0.02"), input_mode="torque", gear=None, J=1e3, coulomb=0.0)
-    pl.set_raw_state(np.concatenate([[fam.upright + math.radians(z.hub_deg)], fam.x[:-1]]), np.zeros(pl.n))
+    pl.set_raw_state(np.concatenate([[fam.origin + math.radians(z.hub_deg)], fam.x[:-1]]), np.zeros(pl.n))
     before, _ = pl.state()
     for _ in range(20):
         pl.advance(0.0, 0.01)

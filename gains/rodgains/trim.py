@@ -25,7 +25,7 @@ class TrimGains(NamedTuple):
     rate: float  # trim change per N m of steady torque beyond the band, per period [rad/(N m)]
     band: float  # steady torque the trim leaves alone [N m]
     gate: float  # trims only while every estimated angle is within this of upright [rad]
-    limit: float  # |trim| ceiling [rad]
+    limit: float  # how far the trim may walk from its start [rad]
     torque_per_offset: float  # G: steady torque per rad of measurement offset on the design model [N m/rad]
     target: float = 0.0  # the steady torque the trim holds: the straightest shape's (straightest_shape) [N m]
     start: float = 0.0  # the trim at power-on: the straightest shape's hub in the encoder's angle [rad]
@@ -46,7 +46,7 @@ def straightest_shape(params) -> StraightestShape:
     """The file's rod's straightest static shape upright: the one whose largest edge deviation from upright is
     smallest. Zero for a rod straight at rest. A rod curved at rest (rod.rest_curvature) has no straight upright
     shape: its zero-moment shape leans the curvature's way, amplified by gravity, and tilting the hub against the
-    bend with a steady torque halves the worst edge's lean (docs/control.md, "A rod curved at rest").
+    bend with a steady torque about halves the worst edge's lean (docs/control.md, "A rod curved at rest").
 
     The curvature is the rod's shape hanging with its hub vertical (rodctl.sim.statics hanging_tip_offset_m), where
     the encoder's zero is taken, so the trim starts at the shape's hub angle; a hub left elsewhere at boot is an

@@ -46,7 +46,7 @@ class _Family:
         self.plant = faithful_plant(params, input_mode="torque", gear=None, coulomb=0.0)
         n = self.plant.n
         y = self.plant.rest_state(about)
-        self.upright = float(y[0])
+        self.origin = float(y[0])  # the hub coordinate of the straight rod at `about`
         self.x = np.concatenate([y[1:n], [0.0]])  # the rod's coordinates past the hub, then the base torque
 
     def _residual(self, x: np.ndarray, hub: float) -> np.ndarray:
@@ -54,7 +54,7 @@ class _Family:
         return self.plant.force(np.concatenate([[hub], x[:-1], np.zeros(n)]), float(x[-1]))
 
     def shape(self, hub_deg: float) -> UprightShape:
-        hub = self.upright + math.radians(hub_deg)
+        hub = self.origin + math.radians(hub_deg)
         x = self.x.copy()
         n = self.plant.n
         scale = np.full(n, 1e-9)
