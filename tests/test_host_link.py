@@ -97,9 +97,11 @@ def test_set_out_of_range_is_refused_with_the_range(capsys):
 
 
 @pytest.mark.parametrize("text, allowed", [
-    ("catch_angle_deg=1e42", "2 <= catch_angle_deg <= min(90, the balance angle limit) deg"),
+    ("catch_angle_deg=1e42", "2 <= catch_angle_deg <= min(90, the balance angle limit), in deg (--params names the "
+                             "design's safety.angle_limit_deg)"),
     ("catch_angle_deg=1e-40", "2 <= catch_angle_deg"),
-    ("swing_amplitude=0", "0.001 <= swing_amplitude <= the firmware's torque ceiling N m"),
+    ("swing_amplitude=0", "0.001 <= swing_amplitude <= the firmware's torque ceiling, in N m (rodctl status gives the "
+                          "ceiling)"),
     ("swing_angle_deg=190", "2 <= swing_angle_deg <= 180 deg"),
     ("swing_angle_deg=1", "2 <= swing_angle_deg <= 180 deg"),
     ("telemetry_decimation=2.5", "integer 1 <= telemetry_decimation <= 1000"),
@@ -329,9 +331,16 @@ def test_console_session_from_a_script():
     out = r.stdout
     assert "mode DISARMED;" in out
     assert ("error: catch_angle_deg=200 out of range: allowed 2 <= catch_angle_deg <= "
-            "min(90, the balance angle limit) deg") in out
+            "min(90, the balance angle limit), in deg") in out
     assert "armed balance: mode CATCH" in out
     assert "mode CATCH;" in out
     assert "error: unknown command 'fly'" in out
     assert out.rstrip().endswith("disarmed and disconnected")
     assert "Traceback" not in r.stderr
+
+
+def test_a_setting_refused_while_armed_says_to_disarm_first():
+    script = "arm swing-up\nset encoder_sign=-1\ndisarm\nquit\n"
+    r = run_rodctl("console", "--port", "sim://", input=script, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert "error: device refused encoder_sign=-1 in mode SWING_UP: disarm first (rodctl disarm)" in r.stdout

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from host_tools import run_rodctl
+from host_tools import rodctl_env, run_rodctl
 from rodgains.params import load_params
 
 from rodctl import paths
@@ -463,3 +463,76 @@ def test_log_convert_of_a_cut_short_log_still_reads_as_cut_short(tmp_path, dst):
     assert lb.trailer == {} and "closed_utc" not in lb.meta and "heartbeat_acks" not in lb.meta
     assert "no trailer: the logger never closed it" in cut_short(lb)
     assert len(lb.data) == len(read_log(a).data)
+
+
+def test_a_damaged_events_file_or_an_infinite_cell_still_plots_and_converts(tmp_path):
+    """The events are the log's notes: a file of that name with a foreign header is named in a warning and the
+    telemetry plots. An inf cell draws as a gap (it set the axis range and crashed), and MCAP's JSON gets null for
+    it as for NaN (Infinity is not JSON)."""
+    w = _write(tmp_path / "a.csv")
+    w.close({"end": "duration"})
+    (tmp_path / "a.csv.events.csv").write_text("garbage,,,\n1,2,3,4\n")
+    r = run_rodctl("plot", str(tmp_path / "a.csv"), "--out", str(tmp_path / "a.png"), env=rodctl_env(MPLBACKEND="Agg"))
+    assert r.returncode == 0 and (tmp_path / "a.png").stat().st_size > 0, r.stderr
+    assert _one_line(r) == (f"rodctl: warning: {tmp_path / 'a.csv.events.csv'}: not a rodctl events file (its columns "
+                            "are ['garbage', '', '', '']); reading the log without its events")
+    (tmp_path / "a.csv.events.csv").unlink()
+    lines = (tmp_path / "a.csv").read_text().splitlines()
+    col = lines[0].split(",").index("theta_hat_1_rad")
+    cells = lines[5].split(",")
+    cells[col] = "inf"
+    lines[5] = ",".join(cells)
+    (tmp_path / "a.csv").write_text("\n".join(lines) + "\n")
+    r = run_rodctl("plot", str(tmp_path / "a.csv"), "--out", str(tmp_path / "b.png"), env=rodctl_env(MPLBACKEND="Agg"))
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+    r = run_rodctl("log-convert", str(tmp_path / "a.csv"), "--out", str(tmp_path / "a.mcap"))
+    assert r.returncode == 0, r.stderr
+    from mcap.reader import make_reader
+
+    with open(tmp_path / "a.mcap", "rb") as f:
+        rows = [json.loads(m.data) for _, ch, m in make_reader(f).iter_messages() if ch.topic == "/telemetry"]
+    assert rows[4]["theta_hat_1_rad"] is None and math.isfinite(rows[5]["theta_hat_1_rad"])
+
+
+def test_arming_a_board_in_fault_writes_nothing_and_keeps_the_log_force_named(tmp_path):
+    """The ARM would be refused: no log of a run that never started, and the good log that --force named stays."""
+    keep = tmp_path / "keep.csv"
+    w = _write(keep)
+    w.close({"end": "duration"})
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    r = run_rodctl("arm", "--balance", "--port", "sim://?restart=watchdog", "--duration", "1", "--out", str(keep),
+                   "--force", timeout=60)
+    assert r.returncode == 1 and _one_line(r).endswith(f"; nothing was armed or written to {keep}")
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_a_default_log_name_never_collides_with_the_last_runs(tmp_path, monkeypatch):
+    from rodctl.logs.writer import default_log_name
+
+    first = default_log_name("csv", tmp_path)
+    (tmp_path / first).write_text("x")
+    second = default_log_name("csv", tmp_path)
+    if second[:19] == first[:19]:  # the same second (a slow machine may have crossed into the next)
+        assert second == first.replace(".csv", "-2.csv")
+    (tmp_path / second).write_text("x")
+    assert default_log_name("csv", tmp_path) not in {first, second}
+
+
+@pytest.mark.parametrize("argv, code, says", [
+    (["log", "--port", "sim://", "--duration", "0.2", "--out", "a" * 300 + ".csv"], 2, "File name too long"),
+])
+def test_what_the_system_refuses_is_one_line(tmp_path, argv, code, says):
+    r = run_rodctl(*argv, cwd=tmp_path)
+    assert r.returncode == code and _one_line(r).endswith(says) and "internal error" not in r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_full_disk_on_stdout_is_one_line():
+    import subprocess
+
+    from host_tools import RODCTL
+
+    with open("/dev/full", "w") as full:
+        r = subprocess.run([*RODCTL, "status", "--port", "sim://"], stdout=full, stderr=subprocess.PIPE, text=True,
+                           env=rodctl_env(), timeout=60)
+    assert r.returncode == 1 and r.stderr.strip() == "rodctl: writing the output: No space left on device"

@@ -529,3 +529,10 @@ def test_tune_searches_the_robust_refinement_only_for_robust_designs():
     assert set(ROBUST_ONLY) <= set(dims)
     lo, hi = dims["design.robust_radius"].bounds(robust)
     assert lo < robust["design"]["robust_radius"] < hi < 1.0  # never a target the loop cannot meet
+
+
+def test_a_sweeps_axes_carry_the_keys_units():
+    from rodctl.robust.figures import _with_unit
+
+    assert _with_unit("rod.length") == "rod.length [m]" and _with_unit("rod.youngs_modulus") == "rod.youngs_modulus [Pa]"
+    assert _with_unit("rod.edges") == "rod.edges"  # a count has no unit to name

@@ -153,9 +153,20 @@ def _main(parser, args) -> int:
         return 130
     except BrokenPipeError:
         return 0
+    except OSError as e:  # the system refused a file or a stream (a name too long, a full disk): not a bug of ours
+        import errno
+
+        if os.environ.get("RODCTL_DEBUG"):
+            raise
+        where = f"{e.filename}: " if e.filename else "writing the output: " if e.errno == errno.ENOSPC else ""
+        print(f"rodctl: {where}{e.strerror or e}", file=sys.stderr)
+        return 2 if e.errno in (errno.ENAMETOOLONG, errno.EINVAL, errno.EISDIR, errno.ENOTDIR) else 1
     except Exception as e:  # a bug: still one line unless asked for the traceback
         if os.environ.get("RODCTL_DEBUG"):
             raise
+        if interrupts():  # a Ctrl-C that a library turned into another error (an import it cut short)
+            _interrupted(KeyboardInterrupt())
+            return 130
         print(f"rodctl: internal error: {type(e).__name__}: {e} (set RODCTL_DEBUG=1 for a traceback)", file=sys.stderr)
         return 1
 

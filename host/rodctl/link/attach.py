@@ -24,7 +24,7 @@ from rodgains.errors import UserError
 
 from rodctl.link import protocol as P
 from rodctl.link.design import design_params
-from rodctl.link.session import Session
+from rodctl.link.session import Session, fault_text
 
 if TYPE_CHECKING:
     from rodgains.params import Params
@@ -92,6 +92,10 @@ def attach(session: Session, design_args=None, *, out: str | None = None, fmt: s
     try:
         session.open()
         a.params, a.source = design_params(session, design_args)
+        latest = session.telemetry if session.telemetry is not None else session.hello
+        if arm_mode is not None and latest is not None and latest.mode == P.Mode.FAULT:
+            # the ARM would be refused: no log of a run that never started, and an old one --force named is kept
+            raise UserError(f"{fault_text(latest.reason)}; nothing was armed" + (f" or written to {out}" if out else ""))
         if out is not None:
             a.writer = attach_device_log(session, out, params=a.params, params_source=a.source, fmt=fmt,
                                          overwrite=overwrite, replay=True)

@@ -181,7 +181,9 @@ class Setting:
         if known:
             return f"{lo}{hi:.6g} {self.unit} ({what}{f', at most {self.max:.6g} {self.unit}' if self.max else ''})"
         bound = f"min({self.max:.6g}, {what})" if self.max is not None else what
-        return f"{lo}{bound} {self.unit}"
+        where = {"ROD_TORQUE_MAX_NM": "rodctl status gives the ceiling",
+                 "ROD_ANGLE_LIMIT_RAD": "--params names the design's safety.angle_limit_deg"}.get(self.design_max, "")
+        return f"{lo}{bound}, in {self.unit}" + (f" ({where})" if where else "")
 
 
     def value_of(self, hello) -> float:
@@ -681,7 +683,8 @@ class Session:
         if ack.result == P.AckResult.BAD_STATE:
             if ack.mode == P.Mode.FAULT:
                 return fault_text(self.current_reason())
-            return f"device refused {what} in mode {name_of(P.Mode, ack.mode)}"
+            hint = "" if ack.mode == P.Mode.DISARMED else ": disarm first (rodctl disarm)"
+            return f"device refused {what} in mode {name_of(P.Mode, ack.mode)}{hint}"
         if ack.result == P.AckResult.BAD_VALUE:
             return f"device refused {what}: value out of range"
         if ack.result == P.AckResult.BUSY:

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from rodgains.atomic_file import atomic_write
-from rodgains.errors import InputError
+from rodgains.errors import InputError, UserError
 
 from rodctl.logs import schema
 from rodctl.logs.schema import TRAILER_KEY
@@ -214,7 +214,16 @@ def read(path: Path, names: list[str] | None):
         etypes = {c: (pa.int64() if d == "i8" else pa.string() if d.startswith("U") else pa.float64())
                   for c, d, _, _ in schema.EVENT_COLUMNS}
         if ev.stat().st_size:
-            events, _ = _csv_table(ev, _source(ev)[0], etypes)
+            try:
+                events, _ = _csv_table(ev, _source(ev)[0], etypes)
+            except (pa.ArrowException, ValueError, KeyError, UserError) as e:
+                events, why = None, str(e).splitlines()[0] if str(e) else type(e).__name__
+            else:  # a file of that name whose header is not the events' (duplicate or foreign columns)
+                names = events.column_names
+                why = "" if len(set(names)) == len(names) and "event_name" in names else f"its columns are {names}"
+                events = events if not why else None
+            if events is None:  # the events are the log's notes, not its data: the telemetry still reads
+                _warn(f"{ev}: not a rodctl events file ({why}); reading the log without its events")
     return meta, table, events
 
 

@@ -52,7 +52,7 @@ SHAPE_SCHEMA = json.dumps({
 
 
 def _clean(v):
-    return None if isinstance(v, float) and math.isnan(v) else v
+    return None if isinstance(v, float) and not math.isfinite(v) else v  # JSON has no NaN or Infinity
 
 
 class McapSink:

@@ -130,8 +130,9 @@ def make_figure(meta: dict, data: np.ndarray, snapshots: int = 6, title: str | N
 
     for i in range(n):
         ax_th.plot(*envelope(t, th[:, i]), lw=0.8, label=f"theta_hat_{i + 1}")
-    if n:
-        lo, hi = np.nanmin(th), np.nanmax(th)
+    finite = th[np.isfinite(th)]  # a damaged cell (inf) draws as a gap, and must not set the upright lines' range
+    if finite.size:
+        lo, hi = finite.min(), finite.max()
         for k in range(round((lo - math.pi) / (2 * math.pi)), round((hi - math.pi) / (2 * math.pi)) + 1):
             ax_th.axhline(math.pi + 2 * math.pi * k, color="0.6", ls="--", lw=0.6)
     ax_th.set_ylabel("angle estimate [rad]")

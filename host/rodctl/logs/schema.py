@@ -122,8 +122,10 @@ def unwrap_us(time_us) -> np.ndarray:
 
 
 def from_upright(theta_rad):
-    """Angle from the nearest upright [rad] in [-pi, pi): 0 upright whichever way the rod came over."""
-    return np.mod(np.asarray(theta_rad, dtype=float), 2 * math.pi) - math.pi
+    """Angle from the nearest upright [rad] in [-pi, pi): 0 upright whichever way the rod came over (NaN where the
+    log's cell is not finite)."""
+    with np.errstate(invalid="ignore"):  # a damaged cell stays a gap, without a warning per call
+        return np.mod(np.asarray(theta_rad, dtype=float), 2 * math.pi) - math.pi
 
 
 def from_upright_deg(theta_rad) -> float:

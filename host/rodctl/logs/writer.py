@@ -47,9 +47,16 @@ def log_format(path: str | Path, fmt: str | None = None) -> str:
     return EXTENSIONS[ext]
 
 
-def default_log_name(fmt: str) -> str:
+def default_log_name(fmt: str, folder: str | Path = ".") -> str:
+    """rod-YYYYMMDD-HHMMSS.EXT, with -2, -3, ... when a log of that second is already in `folder`: the user did
+    not choose the name, so it never collides with the last run's."""
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    return f"rod-{stamp}.{fmt if fmt in ('parquet', 'mcap') else 'csv'}"
+    ext = fmt if fmt in ("parquet", "mcap") else "csv"
+    name, k = f"rod-{stamp}.{ext}", 1
+    while (Path(folder) / name).exists() or (Path(folder) / f"{name}.partial").exists():
+        k += 1
+        name = f"rod-{stamp}-{k}.{ext}"
+    return name
 
 
 def require_format(fmt: str) -> None:

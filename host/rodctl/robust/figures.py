@@ -125,9 +125,9 @@ def frontier_figure(rows: list[dict], x: str, y: str | None, path: Path, title: 
     if y and not isinstance(cols.values[0], str):
         _draw_frontier(ax, rows, x, y, ys, cols)
     marked = critical_length_m is not None and x == "rod.length" and cols.numeric
-    if marked:
-        _mark_critical_length(ax, critical_length_m, len(ys))
     _frame(ax, cols, x, y, ys, marked)
+    if marked:  # after the frame: its words go left or right of the line within the limits
+        _mark_critical_length(ax, critical_length_m, len(ys))
     sm = matplotlib.cm.ScalarMappable(cmap=shade.cmap, norm=matplotlib.colors.Normalize(0, shade.vmax))
     fig.colorbar(sm, ax=ax, label=color_label, pad=0.02)
     if marked:
@@ -227,8 +227,10 @@ def _draw_frontier(ax, rows: list[dict], x: str, y: str, ys: list, cols: _Column
 
 def _mark_critical_length(ax, length_m: float, n_rows: int) -> None:
     ax.axvline(length_m, color="black", ls="--", lw=1)
-    ax.text(length_m, n_rows - 0.45, f" continuum critical length {length_m * 100:.2f} cm",
-            fontsize=7, va="bottom", clip_on=True)
+    # right of the line, or left of it where the line is in the plot's right half: the words stay inside
+    right = length_m > sum(ax.get_xlim()) / 2
+    ax.text(length_m, n_rows - 0.45, f"continuum critical length {length_m * 100:.2f} cm ",
+            fontsize=7, va="bottom", ha="right" if right else "left", clip_on=True)
 
 
 def _frame(ax, cols: _Columns, x: str, y: str | None, ys: list, marked: bool) -> None:
@@ -242,9 +244,18 @@ def _frame(ax, cols: _Columns, x: str, y: str | None, ys: list, marked: bool) ->
     ax.set_ylim(-0.5, len(ys) - 0.5 + (0.5 if marked else 0))
     ax.set_yticks(range(len(ys)))
     ax.set_yticklabels([str(v) for v in ys] if y else [""])
-    ax.set_xlabel(x)
+    ax.set_xlabel(_with_unit(x))
     if y:
-        ax.set_ylabel(y)
+        ax.set_ylabel(_with_unit(y))
+
+
+def _with_unit(name: str) -> str:
+    """A swept key as an axis label with its unit: rod.length [m]."""
+    from rodgains.params import SCHEMA
+
+    section, _, key = name.partition(".")
+    unit = SCHEMA.get(section, {}).get(key).unit if key in SCHEMA.get(section, {}) else ""
+    return f"{name} [{unit}]" if unit and unit != "-" else name
 
 
 def _critical_ratio_axis(ax, length_m: float) -> None:
