@@ -42,13 +42,12 @@ def _fault_of(tr) -> tuple[str, float]:
     """(the reason's name, when [s]) of a run that ended in FAULT, else ("", 0): the pass rule's "no FAULT" is
     the criterion, and a run that broke it says so and why."""
     from rodctl.link import protocol as P
+    from rodctl.link.session import name_of
     from rodctl.sim.scenarios import MODE_FAULT
 
     if not tr.fell:
         return "", 0.0
-    at = float(tr.t[int((tr.mode == MODE_FAULT).argmax())])
-    names = {int(r): r.name for r in P.Reason}
-    return names.get(int(tr.reason), f"reason {int(tr.reason)}"), at
+    return name_of(P.Reason, tr.reason), float(tr.t[int((tr.mode == MODE_FAULT).argmax())])
 
 
 def summary_lines(o) -> list[str]:

@@ -219,8 +219,8 @@ def read(path: Path, names: list[str] | None):
             except (pa.ArrowException, ValueError, KeyError, UserError) as e:
                 events, why = None, str(e).splitlines()[0] if str(e) else type(e).__name__
             else:  # a file of that name whose header is not the events' (duplicate or foreign columns)
-                names = events.column_names
-                why = "" if len(set(names)) == len(names) and "event_name" in names else f"its columns are {names}"
+                header = events.column_names
+                why = "" if len(set(header)) == len(header) and "event_name" in header else f"its columns are {header}"
                 events = events if not why else None
             if events is None:  # the events are the log's notes, not its data: the telemetry still reads
                 _warn(f"{ev}: not a rodctl events file ({why}); reading the log without its events")
