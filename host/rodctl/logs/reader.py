@@ -196,7 +196,8 @@ def cut_short(log: "Log") -> str | None:
     logger never closed it, or the file is damaged before the trailer). None for a complete log."""
     meta, data = log
     bad = int(meta.get("incomplete_rows", "0") or 0)
-    closed = "closed_utc" in meta  # the trailer is written at a clean close
+    # the trailer is written at a clean close; a CSV's lives in its sidecar, so without one it cannot be looked for
+    closed = "closed_utc" in meta or meta.get("sidecar") in ("missing", "unreadable")
     counted = str(meta.get("rows", ""))  # the telemetry rows the close counted (a copy cut at a row's end)
     missing = closed and counted.isdigit() and len(data) < int(counted)
     if not bad and closed and not missing:
