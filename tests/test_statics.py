@@ -167,7 +167,10 @@ def test_a_curved_rod_whose_file_says_so_is_held_near_its_straightest_shape():
     assert own["straightest_deg"] < own["final_dev_deg"] < 3.6 and not own["fault"]
     log = own["log"]
     dev = matrix._deviation_deg(log["theta"]).max(axis=1)
-    assert dev[(log["time"] >= 5.0)].max() < 4.0  # there within 5 s of the release
+    # the simulated rod's own clock, not the machine's: within 4 deg from 5 simulated seconds after the release
+    # (with the trim's target alone, and no start, it was held 30 deg off for 4 s)
+    sim_time_s = log["time"]
+    assert dev[sim_time_s >= 5.0].max() < 4.0
 
 
 def test_the_trim_is_off_where_its_band_spans_its_whole_range():

@@ -88,11 +88,9 @@ def run_gains(args) -> int:
             check_regenerable(f, "--header", force=args.force, inputs=(args.params,))
     d, files = generated_files(args)
     if args.report:  # the report ends on the faithful plant: refuse before printing half of it
-        from rodctl.sim.plant import faithful_problem
+        from rodctl.sim.plant import check_faithful
 
-        problem = faithful_problem(d.params)
-        if problem:
-            raise InputError(problem)
+        check_faithful(d.params)
     warning = buckling_warning(d.params)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)

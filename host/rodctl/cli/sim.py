@@ -141,11 +141,9 @@ def run_sim(args) -> int:
         if name not in SCENARIOS:
             raise InputError(f"unknown scenario {name!r}; one of: {', '.join(SCENARIOS)} (rodctl sim --list)")
     if any(SCENARIOS[n].group != "paper" for n in names):  # the faithful plant's: refused before a compile
-        from rodctl.sim.plant import faithful_problem
+        from rodctl.sim.plant import check_faithful
 
-        problem = faithful_problem(params)
-        if problem:
-            raise InputError(problem)
+        check_faithful(params)
     if args.all and args.readme:  # before every scenario has run, not after
         check_table_page(Path(args.readme))
     outcomes, unexpected = [], []

@@ -135,7 +135,7 @@ def _curvature_lines(d: Design, g) -> list[str]:
     """How near upright a steady base torque can hold the rod if it is curved at rest, what the trim holds, and the
     matrix's curved case on this rig (rodctl.sim.statics)."""
     from rodctl.sim.matrix import CASES, ROBUST_BAND_DEG, apply_overrides
-    from rodctl.sim.statics import hanging_tip_offset_m, straightest_shape, zero_moment_shape
+    from rodctl.sim.statics import hanging_tip_offset_m, upright_shapes
 
     p = d.params
     lines = ["Static shapes upright (rodctl.sim.statics): a rod curved at rest has no straight one; the zero-moment shape "
@@ -148,7 +148,7 @@ def _curvature_lines(d: Design, g) -> list[str]:
                          "shape near upright")
             continue
         try:
-            zero, best = zero_moment_shape(q), straightest_shape(q)
+            zero, best = upright_shapes(q)
         except ArithmeticError as e:
             lines.append(f"  {name} ({q['rod']['rest_curvature']:g} 1/m): {e}")
             continue

@@ -747,15 +747,16 @@ def hub_geometry(p: Params, edges: int, hub_length: float, d: float | None = Non
                 hub_stiffness=2.0 * p.EI / l, hub_damping=2.0 * c / l)
 
 
-def faithful_problem(params: Params) -> str | None:
-    """Why the parameter file cannot make its faithful plant, in one line naming the key, or None. The parameter
-    ranges allow 0 for these because other plants (the paper's model without hub or motor) use them."""
+def check_faithful(params: Params) -> None:
+    """InputError, one line naming the key, when the parameter file cannot make its faithful plant: what a command
+    calls before it prints or compiles anything. The parameter ranges allow 0 for these because other plants (the
+    paper's model without hub or motor) use them."""
     if params["plant"]["model"] == "der" and params["plant"]["hub_length"] == 0:
-        return 'plant.hub_length: must be > 0 with plant.model = "der" (the rod\'s foot is clamped in a hub), got 0'
+        raise InputError('plant.hub_length: must be > 0 with plant.model = "der" (the rod\'s foot is clamped in a hub), '
+                         'got 0')
     if params["motor"]["rotor_inertia"] == 0 and (params["gearbox"]["model"] == "compliant" or params["plant"]["hub_length"] == 0):
-        return ('motor.rotor_inertia: must be > 0 with a compliant gearbox or no hub (the motor side of the gear train '
-                'needs its inertia), got 0')
-    return None
+        raise InputError('motor.rotor_inertia: must be > 0 with a compliant gearbox or no hub (the motor side of the gear '
+                         'train needs its inertia), got 0')
 
 
 def faithful_plant(params: Params, *, input_mode: str = "duty", phase: float = 0.5, **kw) -> Plant:
@@ -763,10 +764,8 @@ def faithful_plant(params: Params, *, input_mode: str = "duty", phase: float = 0
     physical motor (rotor inertia, viscous and Coulomb friction, inductance), the [gearbox] between the
     motor and the rod, the encoder's zero error, the rod's rest curvature and the interrupt's jitter:
     what every pass/fail scenario judges (docs/plant.md). Keyword arguments override Plant's.
-    InputError (one line naming the key) when the file cannot make it (faithful_problem)."""
-    problem = faithful_problem(params)
-    if problem:
-        raise InputError(problem)
+    InputError (one line naming the key) when the file cannot make it (check_faithful)."""
+    check_faithful(params)
     pp = params["plant"]
     args = dict(kind=pp["model"], edges=pp["edges"], input_mode=input_mode, phase=phase,
                 hub_length=pp["hub_length"], coulomb=params["motor"]["coulomb_friction"],

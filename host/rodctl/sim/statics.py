@@ -122,12 +122,18 @@ def straightest_shape(params: Params) -> UprightShape:
     A rod at or past its clamped buckling length has no static shape near upright to hold: ArithmeticError."""
     if params["rod"]["rest_curvature"] == 0.0:
         return UprightShape(0.0, 0.0, 0.0)
+    return upright_shapes(params)[1]
+
+
+def upright_shapes(params: Params) -> tuple[UprightShape, UprightShape]:
+    """(the zero-moment shape, the straightest shape) of a rod curved at rest, from one family: the straightest is
+    searched about the zero-moment hub. ArithmeticError at or past the clamped buckling length."""
     if clamped_ratio(params) >= 1.0:
         raise ArithmeticError("the rod is past its clamped buckling length: no static shape near upright")
-    centre = zero_moment_shape(params).hub_deg
     fam = _Family(params)
-    fam.shape(centre)
+    zero = _zero_torque(fam)
+    centre = zero.hub_deg
     res = minimize_scalar(lambda h: fam.shape(h).largest_deviation_deg, method="bounded",
                           bounds=(centre - SEARCH_HALF_WIDTH_DEG, centre + SEARCH_HALF_WIDTH_DEG),
                           options={"xatol": 1e-4})
-    return fam.shape(float(res.x))
+    return zero, fam.shape(float(res.x))
