@@ -28,7 +28,8 @@ def test_gains_json_into_a_missing_folder_writes_nothing(tmp_path):
     missing = tmp_path / "missing"  # never made: absent on any machine, whoever runs the test
     r = run_rodctl("gains", "--json", str(missing / "d.json"), "--header", str(header))
     assert r.returncode == 2
-    assert _one_line(r) == f"rodctl: --json {missing / 'd.json'}: folder {missing} does not exist"
+    assert _one_line(r) == (f"rodctl: --json {missing / 'd.json'}: folder {missing} does not exist (a result named "
+                            "alone is not given a folder of its own: make it first)")
     assert not header.exists()  # checked before anything was designed or written
 
 

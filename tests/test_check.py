@@ -283,3 +283,24 @@ def test_signs_change_only_while_disarmed_and_only_to_plus_or_minus_one():
         assert s.request_hello().rig & 1  # ENCODER_REVERSED
     r = run_rodctl("set", "--port", "sim://", "motor_sign=0", timeout=60)
     assert r.returncode == 2 and "motor_sign=0 out of range: allowed motor_sign = 1 or -1" in r.stderr
+
+
+def test_a_check_whose_reader_leaves_early_is_not_a_pass():
+    """`rodctl check | head -1`: the report was cut short, so the exit is SIGPIPE's 141 (under `set -o pipefail` the
+    pipeline fails), with no second error at exit; before, it was 0, read as a passed check."""
+    import subprocess
+
+    from host_tools import RODCTL, rodctl_env
+
+    p = subprocess.Popen([*RODCTL, "check", "--port", "sim://", "--yes"], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=rodctl_env())
+    try:
+        first = p.stdout.readline()
+        p.stdout.close()  # the reader leaves, as head does
+        err = p.stderr.read()
+        p.wait(timeout=240)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert first.startswith("PASS identity")
+    assert p.returncode == 141 and "Traceback" not in err and "BrokenPipe" not in err and "Exception ignored" not in err

@@ -538,3 +538,28 @@ def test_a_full_disk_on_stdout_is_one_line():
         r = subprocess.run([*RODCTL, "status", "--port", "sim://"], stdout=full, stderr=subprocess.PIPE, text=True,
                            env=rodctl_env(), timeout=60)
     assert r.returncode == 1 and r.stderr.strip() == "rodctl: writing the output: No space left on device"
+
+
+@pytest.mark.parametrize("fmt", ["csv", "mcap", "parquet"])
+def test_a_copy_that_fills_its_disk_leaves_nothing_and_the_source_unchanged(tmp_path, fmt):
+    """log-convert is all or nothing: a copy the system refuses part way (here a file-size limit, EFBIG, as a FAT32
+    stick at 4 GB) is removed, one line says so, and the source log is untouched."""
+    import resource
+    import signal
+    import subprocess
+
+    from host_tools import RODCTL
+
+    src = tmp_path / "src.csv"
+    _write(src, frames=20000).close({"frames": 20002})
+    before = src.read_bytes()
+    out = tmp_path / "copy" / f"copy.{fmt}"
+
+    def limit() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (60_000, 60_000))  # the source is ~2 MB, its copy no smaller
+    r = subprocess.run([*RODCTL, "log-convert", str(src), "--out", str(out)], capture_output=True, text=True,
+                       env=rodctl_env(), timeout=120, preexec_fn=limit)
+    assert r.returncode == 1 and _one_line(r) == (f"rodctl: the file reached the largest size its disk or the system "
+                                                  f"allows: {out} was not written ({src} is unchanged)")
+    assert list(out.parent.iterdir()) == [] and src.read_bytes() == before

@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from host_tools import Listener, run_rodctl, sim_device, start_rodctl
+from host_tools import Listener, ctrl_c_as_at_a_terminal, run_rodctl, sim_device, start_rodctl
 
 from rodctl.link import protocol as P
 from rodctl.logs import read_log, telemetry
@@ -167,3 +167,47 @@ def test_board_lost_mid_log_ends_with_one_line_and_a_closed_file(tmp_path):
     assert meta["end"] == "error" and "disconnected" in meta
     frame_events = np.count_nonzero(np.isin(log.events["event_name"], ["HELLO", "ACK"]))
     assert int(meta["frames"]) == len(data) + frame_events + int(meta["heartbeat_acks"])  # everything received
+
+
+def _file_size_limit(limit_bytes: int):
+    """Popen preexec_fn: a Ctrl-C as at a terminal, and files no larger than limit_bytes (writes past it fail with
+    EFBIG, as on a FAT32 stick at 4 GB), standing in for a disk that fills while the logger runs."""
+    import resource
+
+    def limit() -> None:
+        ctrl_c_as_at_a_terminal()
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+    return limit
+
+
+@pytest.mark.parametrize("fmt,limit_bytes", [("csv", 300_000), ("mcap", 120_000), ("parquet", 40_000)])
+def test_a_log_that_fills_its_disk_stops_there_disarmed_with_what_it_kept(tmp_path, fmt, limit_bytes):
+    """The write the system refuses ends the run: the board disarmed, one line, and the log is what a reader
+    finds in it (CSV and MCAP keep the rows written, cut short; an unfinished Parquet file is removed)."""
+    import re
+
+    out = tmp_path / f"full.{fmt}"
+    with sim_device() as (dev, pts):
+        log = start_rodctl("log", "--port", pts, "--arm", "balance", "--duration", "60", "--out", str(out),
+                           preexec_fn=_file_size_limit(limit_bytes))
+        try:
+            _, err = log.communicate(timeout=90)
+        finally:
+            if log.poll() is None:
+                log.kill()
+    assert log.returncode == 1 and "Traceback" not in err and "internal error" not in err
+    last = err.strip().splitlines()[-1]
+    said = "rodctl: the file reached the largest size its disk or the system allows: "
+    assert last.startswith(said) and last.endswith("; disarmed"), last
+    if fmt == "parquet":
+        assert last == f"{said}nothing was kept of {out} (a Parquet file cannot be read before its end; CSV and MCAP " \
+                       "logs keep what was written); disarmed"
+        assert list(tmp_path.iterdir()) == []
+        return
+    m = re.search(rf"{re.escape(str(out))} keeps its first (\d+) rows \(([\d.]+) s\), cut short", last)
+    assert m, last
+    data = read_log(out).data
+    assert len(data) == int(m.group(1)) > 500  # what the line says is what a reader finds
+    assert abs(data["time_s"][-1] - data["time_s"][0] - float(m.group(2))) < 0.06
+    assert telemetry(data)["mode_name"][-1] == "CATCH"  # it was armed when the disk filled

@@ -151,8 +151,12 @@ def _main(parser, args) -> int:
     except KeyboardInterrupt as e:
         _interrupted(e)
         return 130
-    except BrokenPipeError:
-        return 0
+    except BrokenPipeError:  # `rodctl check | head`: the reader left; the work was cut short, as SIGPIPE would say
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at the exit's flush
+        except (OSError, ValueError):
+            pass
+        return 141
     except OSError as e:  # the system refused a file or a stream (a name too long, a full disk): not a bug of ours
         import errno
 

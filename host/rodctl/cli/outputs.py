@@ -2,10 +2,11 @@
 experiment, so that a bad path costs the user nothing and leaves nothing half-written.
 
 A single named result (`--out`, `--json`, `--plot`, `--screenshot`) must go into a folder that exists
-and can be written (a typo or a read-only folder is caught), must not be a folder, must not replace
+and can be written (a typo or a read-only folder is caught rather than made), must not be a folder, must not replace
 an existing file unless the command has `--force`, and a figure must have an extension matplotlib
 writes. Collections of files (a simulation's figure and logs, an identification's logs, the header)
-make their folder, the way a run directory is made, and the folder must then be writable too.
+make their folder, the way a run directory is made, and the folder must then be writable too; so does a
+log (`log`/`arm --out`, `scope --record`, `log-convert --out`), which is a run's record. docs/host.md says which.
 Every refusal is an InputError: one line naming the option, exit 2.
 """
 
@@ -114,7 +115,8 @@ def check_output(path: str | Path, what: str, *, force: bool | None = None, figu
     if not parent.is_dir():
         if parent.exists():
             raise InputError(f"{what} {path}: {parent} is a file, not a folder")
-        raise InputError(f"{what} {path}: folder {parent} does not exist")
+        raise InputError(f"{what} {path}: folder {parent} does not exist (a result named alone is not given a "
+                         "folder of its own: make it first)")
     if force is not None and (p.exists() or p.is_symlink()) and not force:
         raise InputError(f"{what} {path} exists; pass --force to overwrite")
     check_folder_writable(parent, f"{what} {path}")

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import sys
 
+from rodgains.errors import UserError
+
 from rodctl.cli.common import (ARM_CHOICES, RateMeter, StatusLine, add_design_args, add_port_arg, check_duration,
                                ctrl_c_watch, no_interrupts, session_for, status_text, stop_signals)
 from rodctl.link import protocol as P
@@ -58,6 +60,8 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
                    arm_mode=arm_mode, duration_s=duration, interrupted=ctrl_c_seen, shield=no_interrupts,
                    started=started, armed=armed, tick=tick, stopping=status.end)
     writer, c, ended = a.writer, a.counters, a.ended
+    if writer is not None and writer.failure is not None:  # the log stopped where the system refused a write
+        raise UserError(writer.failure_text() + _disarm_note(session))
     if writer is not None:
         print(f"wrote {writer.path}: {writer.rows} telemetry rows, {writer.events} events ({c['frames']} frames); "
               f"seq gaps {c['seq_gaps']}, CRC errors {c['crc_errors']}, device dropped {c['device_dropped']}"

@@ -109,7 +109,7 @@ def figure(res: FitResult, path: str | Path) -> Path:
     import matplotlib.pyplot as plt
 
     n = len(res.theta_meas)
-    fig, axes = plt.subplots(2, n, figsize=(4.2 * n, 5.2), squeeze=False, sharex="col")
+    fig, axes = plt.subplots(2, n, figsize=(max(4.2 * n, 6.4), 5.2), squeeze=False, sharex="col")  # one record: the title fits
     count = 2 * math.pi / res.counts_per_rev
     for j, (m, s, k, name) in enumerate(zip(res.theta_meas, res.theta_sim, res.split, res.record_names)):
         t = np.arange(len(m)) * res.period
@@ -117,7 +117,7 @@ def figure(res: FitResult, path: str | Path) -> Path:
         a.plot(t, np.degrees(m), lw=1.0, label="measured (encoder)")
         a.plot(t, np.degrees(s), lw=1.0, ls="--", label="simulated (identified)")
         a.axvspan(t[k] if k < len(t) else t[-1], t[-1], color="0.9", label="held out")
-        a.set_title(name)
+        a.set_title(name if len(name) <= 34 else name[:15] + "..." + name[-16:], fontsize=10)  # a long log name
         b.plot(t, (m - s) / count, lw=0.6, color="C3")
         b.axvspan(t[k] if k < len(t) else t[-1], t[-1], color="0.9")
         b.set_xlabel("time [s]")

@@ -108,11 +108,11 @@ def attach(session: Session, design_args=None, *, out: str | None = None, fmt: s
         while t_end is None or time.monotonic() < t_end:
             time.sleep(POLL_S)
             session.check()
+            if a.writer is not None:
+                a.writer.maybe_flush()  # LogWriteFailed too when the receiving thread's write was refused
             if session.listener_error is not None:
                 e = session.listener_error
-                raise UserError(f"writing {out} failed: {getattr(e, 'strerror', None) or e}")
-            if a.writer is not None:
-                a.writer.maybe_flush()
+                raise e if isinstance(e, UserError) else UserError(f"writing {out} failed: {e}")
             tick(a)
     except KeyboardInterrupt as e:
         a.ended = stopped_by(e)
@@ -131,6 +131,4 @@ def attach(session: Session, design_args=None, *, out: str | None = None, fmt: s
                     a.writer.close(session.log_trailer(a.ended))
                 except UserError as e:
                     a.error = a.error or e
-                except OSError as e:
-                    a.error = a.error or UserError(f"closing {a.writer.path} failed: {e}")
     return a

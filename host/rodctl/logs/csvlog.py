@@ -86,6 +86,14 @@ class CsvSink:
     def write_events(self, rows) -> None:
         self._write(self._e, "".join([_line(self.efmts, r) for r in rows]))
 
+    def abandon(self) -> None:
+        """After a refused write: the files as they are (rows end on a line; the sidecar has no trailer)."""
+        for f in (self._f, self._e):
+            try:
+                f.close()
+            except OSError:
+                pass
+
     def close(self, trailer: dict) -> None:
         for f in (self._f, self._e):
             try:

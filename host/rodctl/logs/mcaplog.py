@@ -109,6 +109,13 @@ class McapSink:
             self._w.add_message(self.ch_e, log_time=ns, publish_time=ns, sequence=0,
                                 data=json.dumps(dict(zip(self.enames, map(_clean, r)))).encode())
 
+    def abandon(self) -> None:
+        """After a refused write: the file as it is, its chunks so far readable, no summary."""
+        try:
+            self._f.close()
+        except OSError:
+            pass
+
     def close(self, trailer: dict) -> None:
         self._w.add_metadata("rodctl_trailer", {k: str(v) for k, v in trailer.items()})
         self._w.finish()

@@ -75,6 +75,14 @@ class ParquetSink:
     def write_events(self, rows) -> None:
         self.events.extend(rows)
 
+    def abandon(self) -> None:
+        """After a refused write: the unfinished file goes (without its footer no reader opens it)."""
+        try:
+            self._w.close()
+        except Exception:  # noqa: BLE001 - the footer's own write fails as the last one did; the file goes anyway
+            pass
+        self.tmp.unlink(missing_ok=True)
+
     def close(self, trailer: dict) -> None:
         names = [c[0] for c in schema.EVENT_COLUMNS]
         self._w.add_key_value_metadata({

@@ -20,7 +20,7 @@ import numpy as np
 from rodgains.errors import InputError
 
 from rodctl.logs import csvlog, mcaplog, parquetlog, schema
-from rodctl.logs.writer import EXTENSIONS, LogWriter
+from rodctl.logs.writer import EXTENSIONS, LogWriteFailed, LogWriter, refused_text
 
 
 class Log(tuple):
@@ -236,12 +236,17 @@ def convert_log(src: str | Path, out: str | Path, fmt: str | None = None, overwr
     w = LogWriter(out, meta, n=n, fmt=fmt, overwrite=overwrite)
     rows = log.data[want].tolist()
     ev = log.events.tolist()
-    with w._lock:
-        w.rows, w.events = len(rows), len(ev)
-        for k in range(0, len(rows), 50000):
-            w._sink.write_rows(rows[k:k + 50000])
-        w._sink.write_events(ev)
-    w.close(log.trailer, verbatim=True)  # the recording's own counters and close time, or none: still cut short
+    try:
+        with w._lock:
+            w.rows, w.events = len(rows), len(ev)
+            for k in range(0, len(rows), 50000):
+                w._sink.write_rows(rows[k:k + 50000])
+            w._sink.write_events(ev)
+        w.close(log.trailer, verbatim=True)  # the recording's own counters and close time, or none: still cut short
+    except (OSError, LogWriteFailed) as e:
+        w.discard()
+        why = refused_text(e if isinstance(e, OSError) else w.failure)
+        raise LogWriteFailed(f"{why}: {out} was not written ({src} is unchanged)") from None
     return out
 
 

@@ -12,6 +12,7 @@ replaced unless overwrite=True (`--force`).
 from __future__ import annotations
 
 import datetime as _dt
+import errno
 import threading
 import time
 from pathlib import Path
@@ -28,6 +29,19 @@ _NAN = float("nan")
 
 
 EXTENSIONS = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet", ".mcap": "mcap"}
+
+
+class LogWriteFailed(UserError):
+    """The system refused a write to a log (a full disk, a removed drive): the log stops there, as one line says."""
+
+
+def refused_text(e: OSError) -> str:
+    """What the system refused, in a few words ("the disk is full")."""
+    if e.errno in (errno.ENOSPC, errno.EDQUOT):
+        return "the disk is full"
+    if e.errno == errno.EFBIG:  # a FAT32 stick's 4 GB, or `ulimit -f`
+        return "the file reached the largest size its disk or the system allows"
+    return f"writing failed ({e.strerror or e})"
 
 
 def log_format(path: str | Path, fmt: str | None = None) -> str:
@@ -124,6 +138,9 @@ class LogWriter:
         self.n = int(n if n is not None else metadata.get("n_edges", 0))
         self.flush_interval = FLUSH_INTERVAL_S[self.format] if flush_interval is None else flush_interval
         self.rows = 0  # telemetry rows
+        self.written_rows = 0  # of them, in the file
+        self.written_until_s = 0.0  # the last written row's device time [s]
+        self.failure: OSError | None = None  # the write the system refused; nothing is written after it
         self.events = 0
         self.heartbeat_acks = 0  # OK acks of heartbeats: counted in the trailer, not written as events
         self.clock = schema.DeviceClock()
@@ -161,6 +178,8 @@ class LogWriter:
         mode, reason = int(msg.mode), int(msg.reason)
         with self._lock:
             t = self.clock(time_us)
+            if self.failure is not None:
+                return
             row = (t, float(host_time_s), int(seq), int(time_us), mode, _name(_MODE_NAMES, mode), reason,
                    _name(_REASON_NAMES, reason), int(msg.flags), int(msg.encoder_count), float(msg.base_rate),
                    float(msg.torque), float(msg.duty), int(msg.step_us), int(msg.overruns),
@@ -183,6 +202,8 @@ class LogWriter:
             self._held = None
 
     def _event_locked(self, t, host_time_s, seq, kind, mode, reason, info) -> None:
+        if self.failure is not None:
+            return
         self._ebuf.append((t, float(host_time_s), int(seq), kind, int(mode), _name(_MODE_NAMES, mode),
                            -1 if reason is None else int(reason),
                            "" if reason is None else _name(_REASON_NAMES, reason), info))
@@ -217,6 +238,8 @@ class LogWriter:
         with self._lock:
             self.clock(time_us)
             held = self._held
+            if self.failure is not None:
+                return
             if held is None or held[2] != int(seq) - 1:
                 self.imu_unmatched += 1
                 return
@@ -249,26 +272,83 @@ class LogWriter:
 
     # --- file -------------------------------------------------------------------------------
     def _flush_locked(self) -> None:
+        if self.failure is not None:
+            raise LogWriteFailed(self.failure_text())
         try:
             if self._buf:
                 rows, self._buf = self._buf, []
                 self._sink.write_rows(rows)
+                self.written_rows += len(rows)
+                self.written_until_s = rows[-1][0]
             if self._ebuf:
                 ev, self._ebuf = self._ebuf, []
                 self._sink.write_events(ev)
         except OSError as e:
-            raise InputError(f"writing {self.path} failed: {e.strerror or e}") from None
+            self._failed(e)
         self._last_flush = time.monotonic()
+
+    def _failed(self, e: OSError) -> None:
+        """Stop at the first refused write: nothing more is written, and the rows kept are the log (lock held)."""
+        self.failure = e
+        self._buf, self._ebuf, self._held = [], [], None
+        self.closed = True
+        self._sink.abandon()
+        self.written_rows, self.written_until_s = self._readable()
+        if not self.written_rows:
+            for f in files_of(self.path, self.format):
+                f.unlink(missing_ok=True)
+        raise LogWriteFailed(self.failure_text()) from None
+
+    def _readable(self) -> tuple[int, float]:
+        """(rows, last device time [s]) a reader finds in what the failed write left: the rows the file holds, not
+        the ones sent to it (an MCAP chunk or a CSV line may have been cut)."""
+        import contextlib
+        import io
+
+        from rodctl.logs.reader import device_time_s, read_log
+
+        try:
+            with contextlib.redirect_stderr(io.StringIO()):  # its "cut short" warning: failure_text says it
+                t = device_time_s(read_log(self.path, ["time_s"]).data)
+        except (UserError, OSError, ValueError):
+            return 0, 0.0
+        return (len(t), float(t[-1])) if len(t) else (0, 0.0)
+
+    def failure_text(self) -> str:
+        """One line: what the system refused, and what is left of the log."""
+        what = refused_text(self.failure)
+        if self.written_rows:
+            left = (f"{self.path} keeps its first {self.written_rows} rows ({self.written_until_s:.1f} s), cut short "
+                    "(plot and log-convert read it)")
+        elif self.format == "parquet":
+            left = (f"nothing was kept of {self.path} (a Parquet file cannot be read before its end; "
+                    "CSV and MCAP logs keep what was written)")
+        else:
+            left = f"nothing was kept of {self.path}"
+        return f"{what}: {left}"
+
+    def discard(self) -> None:
+        """Close and remove every file of this log (a copy that could not be finished: all or nothing)."""
+        with self._lock:
+            self.closed = True
+            self._sink.abandon()
+            for f in files_of(self.path, self.format):
+                f.unlink(missing_ok=True)
 
     def flush(self) -> None:
         """Write everything received so far (the latest row too, without waiting for its IMU frame)."""
         with self._lock:
+            if self.failure is not None:
+                raise LogWriteFailed(self.failure_text())
             if not self.closed:
                 self._release_held()
                 self._flush_locked()
 
     def maybe_flush(self) -> None:
-        """The periodic write: the latest row stays back for its IMU frame."""
+        """The periodic write: the latest row stays back for its IMU frame. LogWriteFailed once a write was refused
+        (here or on the thread that receives the frames)."""
+        if self.failure is not None:
+            raise LogWriteFailed(self.failure_text())
         if time.monotonic() - self._last_flush >= self.flush_interval:
             with self._lock:
                 if not self.closed:
@@ -277,8 +357,10 @@ class LogWriter:
     def close(self, trailer: dict | None = None, *, verbatim: bool = False) -> Path:
         """Write what is left and the trailer (counters). Returns the log path. verbatim: `trailer` is the
         whole trailer, as is (a converted log's; {} or None: none, so the log still reads as cut short),
-        without this writer's close time and counts."""
+        without this writer's close time and counts. LogWriteFailed when a write was refused (then or before)."""
         with self._lock:
+            if self.failure is not None:
+                raise LogWriteFailed(self.failure_text())
             if self.closed:
                 return self.path
             self._release_held()
@@ -294,7 +376,7 @@ class LogWriter:
             try:
                 self._sink.close(tr)
             except OSError as e:
-                raise InputError(f"closing {self.path} failed: {e.strerror or e}") from None
+                self._failed(e)
             self.closed = True
         return self.path
 

@@ -188,8 +188,12 @@ class Scope:
             w, self.writer = self.writer, None
             self.s.remove_listener(w)
             w.note("recording stopped (scope)")
-            w.close(self.s.log_trailer("scope"))
             self.recorded.append(str(w.path))
+            try:
+                w.close(self.s.log_trailer("scope"))
+            except UserError as e:  # a full disk
+                self.message = f"recording stopped: {e}"
+                return
             self.message = f"recorded {w.path}: {w.rows} frames"
             return
         a = self.args
@@ -222,7 +226,12 @@ class Scope:
             self.message = f"link lost: {e}"
             self.stop_requested = True
         if self.writer is not None:
-            self.writer.maybe_flush()
+            try:
+                self.writer.maybe_flush()
+            except UserError as e:  # a full disk: the recording stops, the scope goes on
+                self.s.remove_listener(self.writer)
+                self.recorded.append(str(self.writer.path))
+                self.writer, self.message = None, f"recording stopped: {e}"
         now = time.monotonic()
         t0, f0 = self._frames_at
         if now - t0 >= 1.0:
