@@ -521,3 +521,30 @@ def test_the_renderer_has_a_help(tmp_path):
                        text=True, timeout=120, env=rodctl_env())
     assert r.returncode == 0 and "usage:" in r.stdout and "--fps" in r.stdout
     assert list(tmp_path.iterdir()) == []  # nothing rendered (it rendered into a folder named --help)
+
+
+def test_a_clip_too_short_to_place_in_the_log_is_refused_not_fitted_a_swing_away(filmed, tmp_path):
+    """The first second of the 120 fps clip alone: its best fit was a lag 1.05 s off, mirrored, with a drift of
+    +4648 ppm and every edge 13 to 20 deg off, accepted with only a coverage warning. Its residual says so."""
+    d = filmed[120]
+    video = rewrite(d["video"], tmp_path / "short.mp4", keep=lambda k: k < 120)
+    out = tmp_path / "t.parquet"
+    r = run_rodctl("track", str(video), "--log", str(d["log"]), "--out", str(out), "--quiet", timeout=300)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "only loosely" in r.stderr and "a clip of 1.0 s is too short" in r.stderr
+    assert not out.exists() and not out.with_suffix(".mcap").exists()
+
+
+def test_a_frame_left_out_without_a_gap_is_a_drift_no_camera_has_and_is_said(filmed, tmp_path):
+    """One frame of 720 left out, the container still at 120 fps: the clock fit takes it as a drift of over
+    +1000 ppm (a camera's is a few hundred at most) and the frames' times are off by a few ms: said, not silent."""
+    import re
+
+    d = filmed[120]
+    video = rewrite(d["video"], tmp_path / "one_dropped.mp4", keep=lambda k: k != 360)
+    out = tmp_path / "t.parquet"
+    r = run_rodctl("track", str(video), "--log", str(d["log"]), "--out", str(out), "--quiet", timeout=300)
+    assert r.returncode == 0, r.stderr
+    m = re.search(r"warning: the fitted clock drift ([+-]\d+) ppm is more than a camera's clock drifts", r.stderr)
+    assert m and 1000 < int(m.group(1)) < 4000, r.stderr  # 1 of 720 frames is 1389 ppm of the clip; measured 2215
+    assert "frame times may be off by up to" in r.stderr

@@ -127,14 +127,16 @@ def _max_px(d: np.ndarray) -> np.ndarray:
     return np.max(np.where(np.isfinite(n), n, 0.0), axis=1)
 
 
-def whole_markers(dets: list[np.ndarray]) -> list[np.ndarray]:
-    """Centroids [px] of the blobs of a marker's usual size. A marker partly hidden (a finger at its
-    edge) has a shifted centroid; two markers run together (or something pink) are one blob of about
-    twice the area, with its centroid between them: both are left out, as not seen."""
+def whole_markers(dets: list[np.ndarray]) -> tuple[list[np.ndarray], np.ndarray]:
+    """(centroids [px] of the blobs of a marker's usual size, per frame whether a larger blob was left out). A marker
+    partly hidden (a finger at its edge) has a shifted centroid; two markers run together (or something pink) are
+    one blob of about twice the area, with its centroid between them: both are left out, as not seen. So is a marker
+    smeared by motion blur, which a frame's `large` tells."""
     areas = np.concatenate([d[:, 2] for d in dets if len(d)]) if any(len(d) for d in dets) else np.zeros(0)
     typical = float(np.median(areas)) if areas.size else 0.0
     lo, hi = WHOLE_AREA_SHARE * typical, MERGED_AREA_SHARE * typical
-    return [d[(d[:, 2] >= lo) & (d[:, 2] <= hi), :2] for d in dets]
+    large = np.array([bool(len(d)) and bool(np.any(d[:, 2] > hi)) for d in dets], bool)
+    return [d[(d[:, 2] >= lo) & (d[:, 2] <= hi), :2] for d in dets], large
 
 
 def within_reach(dets: list[np.ndarray], hub_px: np.ndarray, reach_px: float) -> list[np.ndarray]:
@@ -235,7 +237,7 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     detector = Detector(color or ColorRange.parse(None))
     total = video.frames
     dets, same = detect_all(video, detector, (lambda k: progress(k, total)) if progress else None)
-    dets = whole_markers(dets)
+    dets, large = whole_markers(dets)
     counts = np.array([len(d) for d in dets])
     if not len(dets) or np.median(counts) < MIN_MARKERS_PER_FRAME:
         raise InputError(f"{video_path}: no markers of the color {list(detector.color.lo)}..{list(detector.color.hi)} "
@@ -258,6 +260,11 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     else:
         markers_m = to_world(pos_px, hub_px, m_per_px)
     ok = quality <= FILLED
+    smeared = int(np.count_nonzero(large & (quality == UNUSABLE)))
+    if smeared >= max(3, 0.01 * F):
+        warnings.append(f"{smeared} of the {int(np.count_nonzero(quality == UNUSABLE))} frames with too few markers lost a marker to a "
+                        f"blob more than {MERGED_AREA_SHARE:g} x a marker's area: motion blur at the swing's fastest "
+                        "(film with a shorter exposure, 1/1000 s or less), or markers run together")
     if ok.sum() < 20:
         raise InputError(f"{video_path}: only {ok.sum()} of {F} frames show the rod's markers well enough to track")
 
@@ -270,6 +277,8 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     base[ok] = np.unwrap(base[ok])
     slowdowns = (filmed_fps / video.fps,) if filmed_fps is not None else SLOWDOWNS
     al = align(tau[ok], base[ok], t_log, th_log, video.fps, slowdowns)
+    if al.drift_warning():
+        warnings.append(al.drift_warning())
     if al.covered < COVERED_WARN:
         warnings.append(f"the log covers {100 * al.covered:.0f} % of the video's usable frames ({al.covered_s:.1f} s): "
                         "only those are compared, and the clock drift is measured over them (a log cut short, or "

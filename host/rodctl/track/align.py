@@ -27,6 +27,11 @@ MIN_CORRELATION = 0.9  # the fitted base angles must agree this well [-]
 MIN_OVERLAP = 0.5  # share of the video the log must cover at the best lag [-]
 MIN_SWING_DEG = 5.0  # the base must move this much in the video to time it
 MAX_DRIFT_PPM = 5000.0  # camera clocks are good to a few hundred ppm; beyond this the fit is lost
+PLAUSIBLE_DRIFT_PPM = 1000.0  # a fitted drift past this is not the camera's clock: it is said, with what it costs
+# The camera's base angle and the encoder's differ by the gearbox's play (a degree or two), the foot's bend and the
+# centroids' noise: 0.2 to 1.2 deg RMS on every clip of the filming guide, blurred, noisy or recompressed. A best fit
+# 3 deg off is another run's log, or a clip too short to place in it (a 1 s clip fitted a half-swing away, 7.3 deg).
+MAX_RESIDUAL_DEG = 3.0
 # A slow-motion file plays slower than it was filmed: a phone films at 60 to 960 fps and writes a file that
 # plays at 24, 25, 30 or 60. Its container's clock runs this many times slower than the log's [-]; each is
 # tried (1 first) and the best correlation wins: a swing slowed by the wrong factor has the wrong period.
@@ -56,6 +61,16 @@ class Alignment:
     @property
     def drift_ppm(self) -> float:
         return (self.rate - 1.0) * 1e6
+
+    def drift_warning(self) -> str | None:
+        """What a fitted drift beyond a camera clock's (PLAUSIBLE_DRIFT_PPM) means, and what it may cost; None
+        within it."""
+        if abs(self.drift_ppm) <= PLAUSIBLE_DRIFT_PPM:
+            return None
+        ms = abs(self.drift_ppm) * 1e-6 * self.covered_s / 2 * 1e3
+        return (f"the fitted clock drift {self.drift_ppm:+.0f} ppm is more than a camera's clock drifts (a few hundred "
+                f"ppm): frames left out without a gap in their timestamps, or too little motion of the base over "
+                f"{self.covered_s:.1f} s to measure it; frame times may be off by up to {ms:.1f} ms at the clip's ends")
 
     def log_time(self, video_t: np.ndarray) -> np.ndarray:
         """The log's time [s] of the video's times video_t [s, the file's clock]."""
@@ -148,6 +163,11 @@ def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarr
         raise InputError(f"the video's base angle does not follow the log's (correlation {r:.2f} < "
                          f"{MIN_CORRELATION}): a log of another run?")
     res = float(np.sqrt(np.mean((beta[inside] - model) ** 2)))
+    if res > np.radians(MAX_RESIDUAL_DEG):
+        raise InputError(f"the video's base angle follows the log's only loosely at the best fit ({np.degrees(res):.1f} "
+                         f"deg RMS, more than {MAX_RESIDUAL_DEG:g}; camera minus encoder {np.degrees(c):+.1f} deg): a clip "
+                         f"of {np.ptp(tau):.1f} s is too short to place in the log (film 6 s or more of swinging), or "
+                         "a log of another run?")
     return Alignment(off, rate, c, r, res, float(inside.mean()), float(np.ptp(tau[inside])), mirrored, slowdown)
 
 
