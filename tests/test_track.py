@@ -548,3 +548,18 @@ def test_a_frame_left_out_without_a_gap_is_a_drift_no_camera_has_and_is_said(fil
     m = re.search(r"warning: the fitted clock drift ([+-]\d+) ppm is more than a camera's clock drifts", r.stderr)
     assert m and 1000 < int(m.group(1)) < 4000, r.stderr  # 1 of 720 frames is 1389 ppm of the clip; measured 2215
     assert "frame times may be off by up to" in r.stderr
+
+
+def test_a_rod_that_never_moves_asks_for_the_axis_instead_of_more_markers(filmed, tmp_path):
+    """Every marker holds still, so none can be told as the one the rod turns about. It was "never saw all 8
+    markers: pass --markers", with all 8 in every frame (the hub taken at a marker halfway down the rod)."""
+    d = filmed[120]
+    still = {}
+
+    def frozen(k, frame):
+        return still.setdefault("frame", frame)  # the first frame, again and again
+    video = rewrite(d["video"], tmp_path / "still.mp4", change=frozen, keep=lambda k: k < 240)
+    r = run_rodctl("track", str(video), "--log", str(d["log"]), "--out", str(tmp_path / "t.parquet"), "--quiet",
+                   timeout=300)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "the rod hardly moves in this video: 9 of its markers hold still" in r.stderr and "--hub X,Y" in r.stderr

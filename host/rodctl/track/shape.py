@@ -65,7 +65,12 @@ def find_hub(dets: list[np.ndarray], share: float = 0.8, spots=None) -> np.ndarr
                 near.append(np.hypot(*(d - c).T).min())
         return float(np.std(near) / np.median(near)) if len(near) >= 3 else np.inf
 
-    return min((c for c, _ in spots), key=spread)
+    spreads = [spread(c) for c, _ in spots]
+    if not np.isfinite(min(spreads)):
+        raise InputError(f"the rod hardly moves in this video: {len(spots)} of its markers hold still in "
+                         f"{100 * share:.0f} % of the frames, so which one is on the motor axis cannot be told from the "
+                         "rod turning about it; give the axis with --hub X,Y [px], or film the swing")
+    return spots[int(np.argmin(spreads))][0]
 
 
 def order_from_hub(points: np.ndarray, hub: np.ndarray) -> np.ndarray:
@@ -197,15 +202,21 @@ def chain_length(ordered: np.ndarray, hub: np.ndarray) -> float:
 
 def rod_length_px(dets: list[np.ndarray], hub: np.ndarray, markers: int, spots=None) -> float:
     """The rod's length in the image [px]: the median chain length of the frames showing every marker."""
-    lengths = []
     step = max(1, len(dets) // 2000)
     still = [c for c, _ in (static_spots(dets) if spots is None else spots) if np.linalg.norm(c - hub) > 2 * HUB_TOL_PX]
-    for d in dets[::step]:
-        for c in still:  # something else that holds still is not a marker the rod carries past it
-            d = d[np.hypot(*(d - c).T) > HUB_TOL_PX] if len(d) else d
-        m = rod_markers(d, hub)
-        if len(m) == markers:
-            lengths.append(chain_length(m, hub))
+
+    def lengths_without(still: list) -> list[float]:
+        out = []
+        for d in dets[::step]:
+            for c in still:  # something else that holds still is not a marker the rod carries past it
+                d = d[np.hypot(*(d - c).T) > HUB_TOL_PX] if len(d) else d
+            m = rod_markers(d, hub)
+            if len(m) == markers:
+                out.append(chain_length(m, hub))
+        return out
+    lengths = lengths_without(still)
+    if len(lengths) < 3 and still:  # a rod that hangs still most of the clip: its own markers are the still spots
+        lengths = lengths_without([])
     if len(lengths) < 3:
         raise InputError(f"never saw all {markers} markers of the rod in one frame: pass --markers with the "
                          "number on the rod (besides the one on the axis), or --scale")
