@@ -20,7 +20,7 @@ from rodctl.ident import report as R
 from rodctl.sim.plant import faithful_plant
 
 
-@pytest.mark.parametrize("name", ["A", "B", "C", "D", "F"])
+@pytest.mark.parametrize("name", ["A", "B", "C", "D", "F", "G", "H"])
 def test_fit_recovers_a_hidden_rig(name):
     recs = list(records(name))
     assert all(r.ended_in == 0 and r.end_reason == 0 for r in recs), "every experiment plays to its end"
@@ -225,3 +225,11 @@ def test_the_polish_simulates_the_files_plant_where_the_search_left_off():
     own = problem.residual(x)
     assert problem.evaluations == 2
     assert np.abs(own - fast).max() > 0.1  # quantization noise units: the two plants differ
+
+
+def test_a_rig_without_play_and_an_exact_zero_is_written_as_measured(tmp_path):
+    """Rig G: the file says no play and no zero error (it kept the nominal 1 deg and 0.18 deg, their intervals being
+    "+-190 %" and "+-700 %" of values near 0), so the design and the verdict are for the rig measured."""
+    p = identified("G", tmp_path)
+    assert abs(p["gearbox"]["backlash_deg"]) < TOLERANCE_DEG["backlash"]
+    assert abs(p["encoder"]["zero_error_deg"]) < TOLERANCE_DEG["zero_error"]

@@ -189,7 +189,8 @@ def register(sub) -> None:
                     "matrix, writes a complete parameter file with 95 % intervals, and ends with a verdict: the written "
                     "design judged by the matrix on the identified rig (gearbox included), whether the nominal goals "
                     "are met, and what to try next. Exit 0: READY; exit 1: file written but NOT READY, or a value "
-                    "outside its physical range (kept nominal); exit 2: bad input or data that cannot identify the rig.",
+                    "outside its physical range (kept nominal), or an experiment stopped (a FAULT, a rod that did not "
+                    "come to rest: nothing written, the logs so far kept); exit 2: bad input or data that cannot identify the rig.",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("logs", nargs="*", metavar="LOG", help="recorded logs to fit instead of running experiments")
     add_port_arg(p)

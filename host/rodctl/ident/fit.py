@@ -22,6 +22,7 @@ VALIDATION_FRACTION of every record never enters the fit: its percent fit is the
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -62,6 +63,10 @@ class FitParam:
     physical: tuple[float, float]  # outside this the value is flagged, not written [unit]
     typical: float  # scale when the nominal value is 0 [unit]
     tolerance_doc: str = ""
+    # a 95 % half-width within this is identified whatever the value [unit]: a rig with no play, or a boot zero
+    # taken exactly, is measured as such (+-0.02 deg around 0 is "50 x its value" to a relative rule, which kept
+    # the nominal 1 deg of play and 0.18 deg of zero error in the file)
+    known_within: float = 0.0
 
 
 FIT_PARAMS = (
@@ -73,8 +78,8 @@ FIT_PARAMS = (
     FitParam("damping", "rod.damping", "N m s/rad", (0.0, 0.1), (0.0, 0.05), 1e-3),
     # between the encoder and the rod: the gearbox's play (a torque reversal crosses it) and where the
     # boot zero sits from the rod's true hanging (the rod's free swings center on the latter)
-    FitParam("backlash", "gearbox.backlash_deg", "deg", (0.0, 6.0), (0.0, 5.0), 1.0),
-    FitParam("zero_error", "encoder.zero_error_deg", "deg", (-3.0, 3.0), (-2.0, 2.0), 0.2),
+    FitParam("backlash", "gearbox.backlash_deg", "deg", (0.0, 6.0), (0.0, 5.0), 1.0, known_within=0.1),
+    FitParam("zero_error", "encoder.zero_error_deg", "deg", (-3.0, 3.0), (-2.0, 2.0), 0.2, known_within=0.05),
 )
 NAMES = tuple(p.name for p in FIT_PARAMS)
 
@@ -127,15 +132,16 @@ class Simulator:
 
         from rodctl.sim.plant import SimulationError, faithful_plant, run_closed_loop
 
-        plant = faithful_plant(params, input_mode="duty")
+        plant = faithful_plant(params, input_mode="duty", at_rest=False)  # set_start puts each record's rod at rest
         cpr = float(params.counts_per_rev)
         zero = math.radians(params["encoder"]["zero_error_deg"])
         out = []
         fp = ctypes.POINTER(ctypes.c_float)
+        rest = hanging_rest(params)
         for i, (r, duty, torque) in enumerate(zip(self.records, self._duty, self._torque)):
             within = 0.0 if starts is None else float(starts[i])
             theta0 = 2 * math.pi * (r.count[0] + within) / cpr - zero
-            set_start(plant, theta0)
+            set_start(plant, theta0, rest)
             plant.time = 0.0
             self._ctl.lib.rod_replay_load(duty.ctypes.data_as(fp), torque.ctypes.data_as(fp), len(duty),
                                           ctypes.c_float(r.period))
@@ -149,23 +155,36 @@ class Simulator:
         return out
 
 
-def set_start(plant, theta_enc: float) -> None:
-    """The rig at rest with its encoder side at theta_enc [rad, zero removed], the rod straight.
+def hanging_rest(params) -> tuple[float, np.ndarray] | None:
+    """(the hub's angle where the rod hangs free [rad], each edge's angle from the hub's in that shape (N,) [rad]) of
+    the parameter file's rod on its own plant: None for a straight rod (hanging vertically). A rod curved at rest hangs bent, its hub
+    off vertical by the sag's lean; started straight, it moves at once with no torque applied (0.24 deg at the motor
+    in the first seconds at 1.0 1/m), and the fit tunes the friction and the play to a motion the rig never made."""
+    rod = params["rod"]
+    if rod["rest_curvature"] == 0.0:
+        return None
+    key = json.dumps([rod, params["plant"]["model"], params["plant"]["edges"], params["plant"]["hub_length"]],
+                     sort_keys=True, default=str)
+    if key not in _HANGING:
+        from rodctl.sim.statics import hanging_shape
 
-    The rod hangs wherever the play lets it: straight down if the gap around the motor side reaches
-    that far, otherwise against the nearer flank, where the motor's dry friction holds it. A record
-    starts where the last experiment left the rig, most often with the motor on a flank and the rod
-    a few tenths of a degree off hanging; starting the rod at the encoder's angle instead puts it up
-    to half the gap off its rest, and the fit then tunes the friction to a swing the rig never made.
-    With the encoder on the output shaft (or no gearbox) the rod is where the encoder says."""
-    c = plant.config
-    if not c.compliant or c.encoder_on_shaft:
-        plant.set_state(np.full(plant.N, theta_enc))
-        return
-    half = 0.5 * c.backlash
-    hanging = 2.0 * math.pi * round(theta_enc / (2.0 * math.pi))  # the count may be turns from the boot zero
-    plant.set_state(np.full(plant.N, min(max(hanging, theta_enc - half), theta_enc + half)))
-    plant.set_motor_state(theta_enc)
+        hub, bend = hanging_shape(params)
+        if len(_HANGING) > 64:  # one per rod the search visits; its Jacobian's columns share one
+            _HANGING.clear()
+        _HANGING[key] = (hub, bend)
+    return _HANGING[key]
+
+
+_HANGING: dict[str, tuple[float, np.ndarray]] = {}
+
+
+def set_start(plant, theta_enc: float, rest: tuple[float, np.ndarray] | None = None) -> None:
+    """The rig at rest with its encoder side at theta_enc [rad, zero removed] (Plant.start_hanging), the rod in its
+    hanging shape (`rest`: hanging_rest's; None: straight). A record starts where the last experiment left the rig,
+    most often with the motor on a flank and the rod a few tenths of a degree off hanging; starting the rod at the
+    encoder's angle instead puts it up to half the gap off its rest, and the fit then tunes the friction to a swing
+    the rig never made."""
+    plant.start_hanging(theta_enc, rest)
 
 
 _REPLAY = None
@@ -457,7 +476,7 @@ def why_not_identifiable(i: int, fitted: list[FitParam], value: float, ci: float
     rel = ci / abs(value) if value != 0 else math.inf
     if jn[i] == 0 or jn[i] < 1e-6 * jn.max():
         return "theta_1 does not respond to it in these logs"
-    if not rel > UNIDENTIFIABLE_REL_CI:  # not `<=`: a NaN interval is no reason
+    if not rel > UNIDENTIFIABLE_REL_CI or ci <= fitted[i].known_within:  # not `<=`: a NaN interval is no reason
         return ""
     partners = [(fitted[j].name, corr[i, j]) for j in range(len(fitted))
                 if j != i and abs(corr[i, j]) > CORRELATION_LIMIT]

@@ -35,9 +35,9 @@ RETRY_SCALE = 0.7
 MAX_TRIES = 3
 
 
-def _wait_rest(session, say: Callable[[str], None], settle: float = 0.0) -> None:
+def _wait_rest(session, say: Callable[[str], None], settle: float = 0.0, log_dir: Path | None = None) -> None:
     """`settle` seconds, then until the base holds still (the fit starts every record at rest); a
-    FAULT is reported."""
+    FAULT is reported. log_dir: where the logs so far are, for the message when the rod does not rest."""
     from rodctl.link import protocol as P
     from rodctl.link.session import fault_text
 
@@ -47,7 +47,7 @@ def _wait_rest(session, say: Callable[[str], None], settle: float = 0.0) -> None
         while time.monotonic() < end:
             session.check()
             time.sleep(0.05)
-    still_since, deadline = None, time.monotonic() + REST_TIMEOUT_S
+    still_since, deadline, t = None, time.monotonic() + REST_TIMEOUT_S, None
     while time.monotonic() < deadline:
         session.check()
         t = session.wait_telemetry(timeout=1.0)
@@ -60,7 +60,11 @@ def _wait_rest(session, say: Callable[[str], None], settle: float = 0.0) -> None
         else:
             still_since = None
         time.sleep(0.02)
-    raise UserError(f"the rod did not come to rest within {REST_TIMEOUT_S:g} s (|base rate| < {REST_RATE_RAD_S} rad/s)")
+    rate = f"{abs(t.base_rate):.2f} rad/s at the end, " if t is not None else ""
+    kept = (f"; the logs so far are in {log_dir} (rodctl identify LOG ... fits them)" if log_dir is not None
+            and any(log_dir.glob("identify-*.csv")) else "")
+    raise UserError(f"the rod did not come to rest within {REST_TIMEOUT_S:g} s (|base rate| {rate}at rest under "
+                    f"{REST_RATE_RAD_S} rad/s): is it free to hang still? The motor is off{kept}")
 
 
 class SwingWatch:
@@ -170,7 +174,7 @@ def _settle(session, settle, limits, source: str, log_dir: Path, *, soft_limit: 
     if watch.over:
         raise UserError(f"settle move: {watch.over}; motor stopped: is the rod free to swing, and hanging? "
                         f"The logs so far are in {log_dir}")
-    _wait_rest(session, say, settle_s)
+    _wait_rest(session, say, settle_s, log_dir)
 
 
 def prepare(session, params):
@@ -208,7 +212,7 @@ def run_experiments(session, exps, log_dir: Path, stamp: str, params, source: st
             # the first record starts from the rod the user hung still; every later one from where
             # the last experiment left the rig, which the settle move brings back to rest
             first = i == 1 and attempt == 1
-            _wait_rest(session, say)  # a stopped experiment leaves the rod swinging: the settle move starts from rest
+            _wait_rest(session, say, log_dir=log_dir)  # a stopped experiment leaves the rod swinging: the settle move starts from rest
             confirm(f"[{i}/{len(exps)}] {exp.describe()}" + ("" if first else f"\n  before it, {settle.describe()}"))
             if not first:
                 _settle(session, settle, limits, source, log_dir, soft_limit=soft_limit, settle_s=settle_s, say=say)

@@ -459,6 +459,22 @@ class Plant:
         self._lib.rod_plant_motor_state(self._h, ctypes.byref(a), ctypes.byref(b), ctypes.byref(c))
         return a.value, b.value, c.value
 
+    def start_hanging(self, motor_angle: float, rest: tuple[float, np.ndarray] | None = None) -> None:
+        """At rest with the motor side at motor_angle [rad, 0 hanging]: the rod hangs wherever the play lets it,
+        its hub at its free-hanging angle if the gap around the motor side reaches that far, otherwise against the
+        nearer flank, where the motor's dry friction holds it. rest: (the free-hanging hub angle [rad], each edge's
+        angle from the hub's (N,) [rad]) of a rod curved at rest (rodctl.sim.statics.hanging_shape); None: straight,
+        hanging vertically. With the encoder on the output shaft (or no gearbox) the rod's hub is at motor_angle."""
+        h0, bend = rest if rest is not None else (0.0, 0.0)
+        c = self.config
+        if not c.compliant or c.encoder_on_shaft:
+            self.set_state(motor_angle + bend)
+            return
+        half = 0.5 * c.backlash
+        hanging = 2.0 * math.pi * round(motor_angle / (2.0 * math.pi)) + h0  # the angle may be turns from hanging
+        self.set_state(min(max(hanging, motor_angle - half), motor_angle + half) + bend)
+        self.set_motor_state(motor_angle)
+
     def set_motor_state(self, theta_m: float, omega_m: float = 0.0, current: float = 0.0) -> None:
         _check(self._lib.rod_plant_set_motor_state(self._h, float(theta_m), float(omega_m), float(current)),
                "set_motor_state")
@@ -759,11 +775,15 @@ def check_faithful(params: Params) -> None:
                          'train needs its inertia), got 0')
 
 
-def faithful_plant(params: Params, *, input_mode: str = "duty", phase: float = 0.5, **kw) -> Plant:
+def faithful_plant(params: Params, *, input_mode: str = "duty", phase: float = 0.5, at_rest: bool = True,
+                   **kw) -> Plant:
     """The plant the parameter file's [plant] table describes (model, edges, hub_length), with the
     physical motor (rotor inertia, viscous and Coulomb friction, inductance), the [gearbox] between the
     motor and the rod, the encoder's zero error, the rod's rest curvature and the interrupt's jitter:
     what every pass/fail scenario judges (docs/plant.md). Keyword arguments override Plant's.
+    It starts hanging at rest, the motor side at 0: a rod curved at rest in its static shape, its hub as near its
+    free-hanging angle as the play lets it (Plant.start_hanging; at_rest=False: straight, for a caller that sets
+    the state itself).
     InputError (one line naming the key) when the file cannot make it (check_faithful)."""
     check_faithful(params)
     pp = params["plant"]
@@ -775,7 +795,12 @@ def faithful_plant(params: Params, *, input_mode: str = "duty", phase: float = 0
                 encoder_on_shaft=params["encoder"]["location"] == "output",
                 imu=ImuConfig.from_params(params) if params["sensors"]["tip_imu"] else None)
     args.update(kw)
-    return Plant(params, **args)
+    pl = Plant(params, **args)
+    if at_rest and params["rod"]["rest_curvature"] != 0.0:
+        from rodctl.sim.statics import hanging_shape
+
+        pl.start_hanging(0.0, hanging_shape(params))  # started straight, the bent rod would swing with nothing applied
+    return pl
 
 
 # --- controller (firmware SIL library) ---------------------------------------------------------

@@ -43,7 +43,7 @@ class _Family:
     def __init__(self, params: Params, about: float = math.pi):
         from rodctl.sim.plant import faithful_plant
 
-        self.plant = faithful_plant(params, input_mode="torque", gear=None, coulomb=0.0)
+        self.plant = faithful_plant(params, input_mode="torque", gear=None, coulomb=0.0, at_rest=False)
         n = self.plant.n
         y = self.plant.rest_state(about)
         self.origin = float(y[0])  # the hub coordinate of the straight rod at `about`
@@ -89,6 +89,15 @@ def hanging_nodes(params: Params, hub_deg: float = 0.0) -> np.ndarray:
     fam = _Family(params, about=0.0)
     fam.shape(float(hub_deg))
     return fam.plant.nodes()
+
+
+def hanging_shape(params: Params) -> tuple[float, np.ndarray]:
+    """(the hub's angle from vertical where the rod hangs free, no torque at its hub [rad]; each edge's angle from the
+    hub's in that shape (N,) [rad]), on the parameter file's own plant: where a rod curved at rest comes to rest."""
+    fam = _Family(params, about=0.0)
+    shape = _zero_torque(fam)  # leaves the plant in that shape
+    theta, _ = fam.plant.state()
+    return math.radians(shape.hub_deg), np.asarray(theta - theta[0], float)
 
 
 def hanging_tip_offset_m(params: Params) -> float:

@@ -139,7 +139,7 @@ class _Model:
 
         self.params, self.hub_deg = params, float(hub_deg)
         # the markers are at arc lengths along the rod's material, not along its (slightly stretched) nodes
-        self.s_nodes = faithful_plant(params, input_mode="torque", gear=None, coulomb=0.0).node_arc()
+        self.s_nodes = faithful_plant(params, input_mode="torque", gear=None, coulomb=0.0, at_rest=False).node_arc()
         self.s_m = np.linspace(0.0, float(params["rod"]["length"]), markers + 1)[1:]
 
     def __call__(self, kappa_per_m: float) -> np.ndarray:
