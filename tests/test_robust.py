@@ -319,7 +319,14 @@ def test_sweep_refused_design_is_a_row_and_parquet_has_one_row_per_run(tmp_path,
                  "--seconds", str(SECONDS), "--jobs", "2", "--out", str(out)]) == 0
     rows = pq.read_table(out).to_pylist()
     assert [r["design.method"] for r in rows] == ["sampled", "continuous"]
-    assert rows[1]["refused"] and "refused" in rows[1]["reason"] and not rows[0]["refused"]
+    assert rows[1]["refused"] and rows[1]["reason"].count("design refused") == 1 and not rows[0]["refused"]
+    # every run column, typed, whatever the runs did: two sweeps' files read together (pl.read_parquet([a, b]));
+    # a balance sweep's caught_at_s was a `null` column, and a sweep of refused points had no metric columns
+    from rodctl.robust.output import RUN_COLUMN_TYPES
+
+    schema = pq.read_schema(out)
+    assert {k: str(schema.field(k).type) for k in RUN_COLUMN_TYPES} == {
+        k: {"float64": "double"}.get(t, t) for k, t in RUN_COLUMN_TYPES.items()}
     assert out.with_suffix(".png").exists()
     assert "1 refused" in capsys.readouterr().out
 
@@ -339,8 +346,47 @@ def test_tune_tiny_budget_writes_a_complete_file_and_resumes(tmp_path, capsys):
     assert "(3 trials" in capsys.readouterr().out
     trials = json.loads((study / "trials.json").read_text())
     assert [t["number"] for t in trials] == [0, 1, 2] and all("score" in t for t in trials)
+    # the resumed sampler draws anew: seeded as a new study, its first draw was trial #1's again (budget wasted)
+    assert trials[2]["values"] != trials[1]["values"]
     # the study pins its inputs
     assert main(argv[:4] + ["2"] + argv[5:] + ["--budget", "3", "--force"]) == 2
+
+
+def test_a_start_cut_short_by_ctrl_c_is_tried_again_on_resume(tmp_path, capsys, monkeypatch):
+    """Ctrl-C in trial #0 (the parameter file itself) marked it failed; resumed, it was never run again, and the
+    file said "Starting point ... trial #1: not scored" of a random trial. The start is what a tune must not fall
+    below, so it runs again and is named as the start."""
+    from rodctl.robust import tune as T
+
+    study, out = tmp_path / "study", tmp_path / "tuned.toml"
+    argv = ["tune", "--cases", "nominal", "--samples", "0", "--seconds", str(SECONDS), "--only", "lqr.q_angle",
+            "--no-goals", "--jobs", "1", "--study", str(study), "--out", str(out), "--budget", "2"]
+    real = T.evaluate
+
+    def interrupted(*a, **kw):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(T, "evaluate", interrupted)
+    assert main(argv) == 130
+    monkeypatch.setattr(T, "evaluate", real)
+    capsys.readouterr()
+    assert main(argv) == 0
+    trials = json.loads((study / "trials.json").read_text())
+    start = load_params()["lqr"]["q_angle"]
+    assert trials[0]["state"] == "FAIL" and trials[1]["state"] == "COMPLETE"
+    assert trials[1]["values"] == {"lqr.q_angle": start}  # the start, run again first
+    assert "# Starting point: " in out.read_text() and "trial #1: score" in out.read_text()
+
+
+def test_tune_refuses_a_starting_design_it_cannot_make(tmp_path, capsys):
+    """It said "no trial met the nominal goals ... use --no-goals" (exit 0) and wrote the refused design to --out,
+    which robustness then refused (exit 3)."""
+    out = tmp_path / "t.toml"
+    assert main(["tune", "--set", "rod.edges=20", "--set", "observer.process_noise_torque=0.53", "--cases", "quick",
+                 "--samples", "0", "--budget", "2", "--jobs", "1", "--out", str(out)]) == 3
+    err = capsys.readouterr().err
+    assert err.startswith("rodctl: the starting design is refused (discrete Riccati equation failed") and \
+        "gains --report" in err
+    assert not out.exists()
 
 
 def test_tune_says_plainly_when_no_trial_met_the_nominal_goals(tmp_path, capsys):
@@ -536,3 +582,37 @@ def test_a_sweeps_axes_carry_the_keys_units():
 
     assert _with_unit("rod.length") == "rod.length [m]" and _with_unit("rod.youngs_modulus") == "rod.youngs_modulus [Pa]"
     assert _with_unit("rod.edges") == "rod.edges"  # a count has no unit to name
+
+
+def test_a_start_from_value_outside_the_search_is_said_and_not_tried(tmp_path, capsys):
+    """It ran lqr.q_angle = 5000 against the searched [0.1, 1000] with only Optuna's own UserWarning."""
+    big = tmp_path / "big_q.toml"
+    assert main(["params", "--set", "lqr.q_angle=5000", "--out", str(big)]) == 0
+    study, out = tmp_path / "study", tmp_path / "t.toml"
+    assert main(["tune", "--start-from", str(big), "--only", "lqr.q_angle", "--cases", "nominal", "--samples", "0",
+                 "--seconds", str(SECONDS), "--budget", "2", "--jobs", "1", "--no-goals", "--study", str(study),
+                 "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert (f"rodctl: warning: --start-from {big}: lqr.q_angle = 5000.0 is outside the searched range [0.1, 1000]; "
+            "that value is not tried") in err and "UserWarning" not in err
+    trials = json.loads((study / "trials.json").read_text())
+    assert all(0.1 <= t["values"]["lqr.q_angle"] <= 1000 for t in trials)
+
+
+def test_a_score_sweep_says_each_point_s_score_and_keeps_it(tmp_path, capsys):
+    """It printed only "2 grid points: 0 pass, 2 fail" (all runs passing or not), kept no score in the file, and
+    took --case and --criterion, which a score does not use, without a word."""
+    pq = pytest.importorskip("pyarrow.parquet")
+    out = tmp_path / "sc.parquet"
+    argv = ["sweep", "--scenario", "score", "--cases", "nominal", "--samples", "0", "--grid", "rod.edges=5,8",
+            "--seconds", str(SECONDS), "--jobs", "1", "--out", str(out), "--plot", ""]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    meta = json.loads(pq.read_schema(out).metadata[b"rodctl"])
+    points = meta["points"]
+    assert [p["rod.edges"] for p in points] == [5, 8] and meta["cases"] == "nominal" and "case" not in meta
+    for p in points:
+        assert p["score"] == p["passed_runs"] / p["runs"] and p["runs"] == 2
+        assert f"  rod.edges = {p['rod.edges']}: score {p['score']:.4f} ({p['passed_runs']}/2 runs pass)" in text
+    assert main(argv + ["--case", "E+15", "--force"]) == 2
+    assert "--case picks one task's run" in capsys.readouterr().err

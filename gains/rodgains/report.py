@@ -164,6 +164,8 @@ def report_text(d: Design) -> str:
         f"  controller poles (slowest, as ln z / dt): {_poles(ctrl, d.dt)} rad/s",
         f"  observer poles   (slowest, as ln z / dt): {_poles(obs, d.dt)} rad/s",
         f"  closed-loop spectral radius (plant + observer + LQR): {radius_text(d.checks['closed_loop_spectral_radius'], 6)}",
+        # not the two lists above: the disturbance estimate's action closes a loop of its own (a slow integral mode)
+        f"  closed-loop poles (slowest, as ln z / dt): {_poles(np.linalg.eigvals(d.loop()), d.dt)} rad/s",
         f"  stable for actuator gain in [{lo:.3g}, {hi:.3g}]; phase margin {pm:.1f} deg at the plant input",
         f"  with one extra period of delay: spectral radius {radius_text(one_period_delay_radius(d), 4)}",
         f"  one encoder count ({np.degrees(rad_per_count):.3f} deg) moves the torque by "

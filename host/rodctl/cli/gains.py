@@ -27,6 +27,12 @@ def params_from_args(args) -> Params:
     return load_params(args.params, args.overrides)
 
 
+def set_line(args) -> str:
+    """The --set overrides on the parameter file as a figure title's last line ("" without any): the title names
+    the design it shows, not only its file."""
+    return f"\n--set {' '.join(args.overrides)}" if getattr(args, "overrides", None) else ""
+
+
 def robust_progress(run: int, most: int) -> None:
     """One line per L-BFGS run of a robust refinement (design.method = robust): 1 to 3 s each, up to
     half a minute in all on a new parameter file; a cached design prints nothing."""

@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 from rodctl.cli.common import check_sim_seconds
-from rodctl.cli.gains import add_param_args, params_from_args
+from rodctl.cli.gains import add_param_args, params_from_args, set_line
 from rodctl.cli.outputs import check_apart, check_output
 from rodctl.paths import shown
 
@@ -55,7 +55,7 @@ def _fmt(v, nd=2) -> str:
 
 def table_lines(rows: list[dict]) -> list[str]:
     """A line per case (both tasks side by side); Monte Carlo plants summed up at the end."""
-    from rodctl.sim.matrix import ROBUST_BAND_DEG, TASKS, buckled, marks, past_band
+    from rodctl.sim.matrix import CASES, ROBUST_BAND_DEG, TASKS, buckled, criterion, marks, past_band
 
     def cell(r):
         if r is None:
@@ -69,7 +69,8 @@ def table_lines(rows: list[dict]) -> list[str]:
             by.setdefault(r["case"], {})[r["task"]] = r
     past = {name: r["buckling_ratio"] for name, d in by.items() for r in d.values() if buckled(r)}
     bent = {name: r["straightest_deg"] for name, d in by.items() for r in d.values() if past_band(r)}
-    names = {name: name + marks(next(iter(d.values()))) for name, d in by.items()}
+    strict = [name for name in by if name in CASES and CASES[name].strict]
+    names = {name: name + (" *" if name in strict else "") + marks(next(iter(d.values()))) for name, d in by.items()}
     w = max([14, *map(len, names.values())])  # the case column as wide as its longest name
     lines = [f"  {'':{w}s}" + "".join(f" | {t:^28s}" for t in TASKS),
              f"  {'case':{w}s}" + "".join(f" | {'settle s':>9s} {'end deg':>9s} {'result':>8s}" for _ in TASKS)]
@@ -85,6 +86,9 @@ def table_lines(rows: list[dict]) -> list[str]:
         n = len({r["draw"] for r in draws})
         lines.append(f"  Monte Carlo plants ({n}): " + ", ".join(parts)
                      + (f"; {buckled_draws} past the buckling length" if buckled_draws else ""))
+    if strict:
+        lines.append(f"  * held to the nominal goals, not the {ROBUST_BAND_DEG:g} deg band the other runs are: balance: "
+                     f"{criterion('balance', strict=True)}; swing-up: {criterion('swingup', strict=True)}")
     if past or buckled_draws:
         which = f" ({', '.join(f'{name} {v:.3f} x' for name, v in past.items())})" if past else ""
         lines.append("  ^ past the buckling length: the rod above the hub is longer than Greenhill's clamped length"
@@ -150,7 +154,7 @@ def run_robustness(args) -> int:
     if args.plot:
         on = "faithful plant" if plant is None else f"rod of {shown(plant.source)}"
         draws = f" + {samples} Monte Carlo plants (seed {seed})" if samples else ""
-        title = f"{shown(params.source)}: {sc.text()}\ncase set {args.cases!r}{draws} on the {on}"
+        title = f"{shown(params.source)}: {sc.text()}\ncase set {args.cases!r}{draws} on the {on}" + set_line(args)
         written.append(figures.heatmap(rows, Path(args.plot), title))
     for w in written:
         print(f"wrote {w}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from rodctl.cli.gains import add_param_args, params_from_args
+from rodctl.cli.gains import add_param_args, params_from_args, set_line
 from rodctl.cli.outputs import check_output
 from rodctl.cli.robustness import add_exec_args, add_score_args, check_score_args, command_line
 from rodctl.paths import shown
@@ -21,6 +21,11 @@ def run_sweep(args) -> int:
     axes = W.parse_grid(args.grid)
     if args.scenario not in W.SCENARIOS:
         raise InputError(f"--scenario {args.scenario}: one of {', '.join(W.SCENARIOS)}")
+    if args.scenario == "score" and (args.case is not None or args.criterion is not None):
+        raise InputError(f"--{'case' if args.case is not None else 'criterion'} picks one task's run; --scenario score "
+                         "scores the case set --cases with the matrix's own rules")
+    args.case = args.case or "nominal"
+    args.criterion = args.criterion or "case"
     if args.case not in CASES:
         raise InputError(f"--case {args.case}: unknown case; one of {', '.join(CASES)}")
     if args.scenario != "score" and args.scenario not in CASES[args.case].tasks:
@@ -41,8 +46,15 @@ def run_sweep(args) -> int:
                   args.seconds, jobs=args.jobs, scheduler=args.scheduler, say=lambda line: print(line, file=sys.stderr))
     W.write_parquet(sweep, args.out, command_line(sys.argv[1:]))
     n_points, n_ok, n_ref = len(sweep.points), sweep.passed, sweep.refused
-    print(f"{n_points} grid points: {n_ok} pass, {n_points - n_ok - n_ref} fail, "
-          f"{n_ref} refused  [{sweep.wall_s:.1f} s]")
+    if args.scenario == "score":  # a point's verdict is its score, not pass or fail
+        print(f"{n_points} grid points scored, {n_ref} refused  [{sweep.wall_s:.1f} s]")
+        for pt in sweep.points:
+            where = ", ".join(f"{k} = {pt[k]}" for k in sweep.names)
+            print(f"  {where}: " + ("design refused" if pt["refused"] else
+                                    f"score {pt['score']:.4f} ({pt['passed_runs']}/{pt['runs']} runs pass)"))
+    else:
+        print(f"{n_points} grid points: {n_ok} pass, {n_points - n_ok - n_ref} fail, "
+              f"{n_ref} refused  [{sweep.wall_s:.1f} s]")
     names, crit = sweep.names, sweep.critical_length_m
     for yv, xv in (sweep.frontier() or {}).items():
         ratio = f" = {xv / crit:.3f} x the continuum critical length" if crit and xv is not None else ""
@@ -53,7 +65,7 @@ def run_sweep(args) -> int:
         if len(axes) > 2:
             print("no figure: it shows one or two grid axes", file=sys.stderr)
         else:
-            W.write_figure(sweep, plot, shown(params.source))
+            W.write_figure(sweep, plot, shown(params.source) + set_line(args))
             print(f"wrote {plot}")
     return 0
 
@@ -70,10 +82,10 @@ def register(sub) -> None:
                    help="section.key=start:stop:step or section.key=v1,v2,... (repeatable; one axis each)")
     s.add_argument("--scenario", default="balance", metavar="NAME",
                    help="balance (default), swingup, or score (the robustness score at every point)")
-    s.add_argument("--case", default="nominal", metavar="NAME", help="matrix case for balance/swingup (default nominal)")
-    s.add_argument("--criterion", choices=("case", "robust"), default="case",
+    s.add_argument("--case", metavar="NAME", help="matrix case for balance/swingup (default nominal; not with score)")
+    s.add_argument("--criterion", choices=("case", "robust"),
                    help="pass rule: the case's own (default; nominal holds the strict settle-time goals) or the "
-                        "robust one (no FAULT, every link within 3 deg at the end)")
+                        "robust one (no FAULT, every link within 3 deg at the end); not with score")
     add_score_args(s)
     add_exec_args(s)
     s.add_argument("--out", required=True, metavar="PARQUET", help="one row per run")

@@ -6,7 +6,7 @@ import shlex
 import sys
 import time
 
-from rodgains.errors import InputError
+from rodgains.errors import DesignRefused, InputError
 
 from rodctl.cli.gains import add_param_args, params_from_args
 from rodctl.cli.outputs import check_output, check_output_folder
@@ -59,11 +59,21 @@ def run_tune(args) -> int:
     from rodgains.params import load_params
 
     starts = [load_params(f) for f in args.start_from]
+    for f, extra in zip(args.start_from, starts):
+        for what in T.outside_the_search(extra, dims, params):
+            print(f"rodctl: warning: --start-from {f}: {what}; that value is not tried", file=sys.stderr)
     meta = {"params_sha256": params.sha256(), "cases": args.cases, "samples": samples, "seed": seed,
             "seconds": args.seconds, "space": [d.text(params) for d in dims], "goals": args.goals}
     if args.study:
         T.check_study(args.study, meta)  # before the workers start: a study it cannot resume is one line
     runs = S.unit_count(params, args.cases, samples)
+    from rodctl.build.sil_build import build_sil
+
+    try:  # the search starts from this design: one it cannot make is the user's to fix, not a trial that scores 0
+        build_sil(params)
+    except DesignRefused as e:
+        raise DesignRefused(f"the starting design is refused ({str(e).removeprefix('design refused: ')}); a tune searches around a design that works: "
+                            "see rodctl gains --report") from None
     t0 = time.monotonic()
     with Runner(args.jobs, args.scheduler) as runner:
         print(f"tune: {len(dims)} parameters, {runs} runs per trial (case set {args.cases!r} + Monte Carlo "

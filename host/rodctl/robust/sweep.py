@@ -201,7 +201,8 @@ def point_rows(rows: list[dict], names: list[str], scenario: str, params: Params
             sc = S.score(sub, apply(params, head)) if not refused else None
             out.append({**head, "refused": refused, "reason": sub[0].get("reason", "") if refused else "",
                         "passed": bool(sc and sc.passed == sc.runs),
-                        "score": sc.score if sc else 0.0, "settle_s": None})
+                        "score": sc.score if sc else 0.0, "passed_runs": sc.passed if sc else 0,
+                        "runs": sc.runs if sc else len(sub), "margin": sc.margin if sc else 0.0, "settle_s": None})
         else:
             out.append(sub[0])
     return out
@@ -242,8 +243,11 @@ class Sweep:
 
     def meta(self, command: str) -> dict:
         """The Parquet file's metadata; command: the command line that ran the sweep."""
+        what = ({"cases": self.cases, "points": [{k: p[k] for k in (*self.names, "refused", "score", "passed_runs",
+                                                                    "runs", "margin")} for p in self.points]}
+                if self.scenario == "score" else {"case": self.case, "criterion": self.criterion})
         return {"command": command, "grid": {a.name: list(a.values) for a in self.axes},
-                "scenario": self.scenario, "case": self.case, "params_sha256": self.params.sha256(),
+                "scenario": self.scenario, **what, "params_sha256": self.params.sha256(),
                 "params_source": self.params.source, "parameters": self.params.values,
                 "wall_s": round(self.wall_s, 1)}
 
@@ -272,9 +276,10 @@ def run(params: Params, axes: list[Axis], scenario: str, case: str, criterion: s
 
 def write_parquet(sweep: Sweep, path: str | Path, command: str) -> Path:
     """A row per run, with Sweep.meta(command) as the file's metadata."""
+    from rodctl.robust.output import RUN_COLUMN_TYPES
     from rodctl.robust.output import write_parquet as write
 
-    return write(path, sweep.rows, sweep.meta(command))
+    return write(path, sweep.rows, sweep.meta(command), RUN_COLUMN_TYPES)
 
 
 def write_figure(sweep: Sweep, path: str | Path, params_shown: str) -> Path:

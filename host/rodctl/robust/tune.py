@@ -122,15 +122,30 @@ def candidate(params: Params, values: dict) -> Params:
     return params.with_overrides(*(f"{k}={v!r}" for k, v in values.items()))
 
 
-def starting_point(params: Params, dims: tuple[Dim, ...]) -> dict:
-    """The parameter file's own values, for the dimensions where they are inside the searched range."""
+def starting_point(params: Params, dims: tuple[Dim, ...], searched: Params | None = None) -> dict:
+    """The parameter file's own values, for the dimensions where they are inside the searched range (that of
+    `searched`, the study's parameter file; default: params itself, whose values the range always holds)."""
     out = {}
     for d in dims:
         sec, key = d.name.split(".")
         v = params[sec][key]
-        lo, hi = d.bounds(params)
+        lo, hi = d.bounds(searched or params)
         if (d.choices and v in d.choices) or (not d.choices and lo <= v <= hi):
             out[d.name] = v
+    return out
+
+
+def outside_the_search(extra: Params, dims: tuple[Dim, ...], params: Params) -> list[str]:
+    """The values of a --start-from file outside the range the study searches (params'), in words: they are not
+    tried (a trial there would be outside every distribution the sampler knows)."""
+    inside = starting_point(extra, dims, params)
+    out = []
+    for d in dims:
+        if d.name not in inside:
+            sec, key = d.name.split(".")
+            lo, hi = d.bounds(params)
+            out.append(f"{d.name} = {extra[sec][key]!r} is outside the searched "
+                       + (f"choices {{{', '.join(map(str, d.choices))}}}" if d.choices else f"range [{lo:g}, {hi:g}]"))
     return out
 
 
@@ -188,8 +203,14 @@ def open_study(study_dir: str | None, meta: dict, sampler_seed: int):
 
         write_json(meta_path, meta)
     storage = JournalStorage(JournalFileBackend(str(folder / "journal.log")))
-    return optuna.create_study(study_name=STUDY_NAME, direction="maximize", sampler=sampler, storage=storage,
-                               load_if_exists=True)
+    study = optuna.create_study(study_name=STUDY_NAME, direction="maximize", sampler=sampler, storage=storage,
+                                load_if_exists=True)
+    # a resumed study's sampler starts past the draws already made: seeded as new, its first random (startup)
+    # draws would be those of trials #1, #2, ... again
+    done = len(study.get_trials(deepcopy=False))
+    if done:
+        study.sampler = optuna.samplers.TPESampler(seed=sampler_seed + done, multivariate=True)
+    return study
 
 
 def completed(study) -> list:
@@ -270,10 +291,16 @@ def tune(params: Params, runner, *, dims: tuple[Dim, ...], budget: int, make_uni
     from optuna.trial import TrialState
 
     study = open_study(study_dir, meta, sampler_seed)
-    if not study.get_trials(deepcopy=False):
-        study.enqueue_trial(starting_point(params, dims))
+    start = starting_point(params, dims)
+    before = study.get_trials(deepcopy=False)
+    if not before:
+        study.enqueue_trial(start)
         for extra in starts:
-            study.enqueue_trial(starting_point(extra, dims), skip_if_exists=True)
+            point = starting_point(extra, dims, params)
+            if point:  # nothing of it inside the search: not a trial of its own (a random one)
+                study.enqueue_trial(point, skip_if_exists=True)
+    elif not any(t.state in (TrialState.COMPLETE, TrialState.WAITING) and t.params == start for t in before):
+        study.enqueue_trial(start)  # cut short by a Ctrl-C: the start is what the result must not fall below
     done = completed(study)
     bar = None
     if progress:
@@ -327,7 +354,7 @@ def tune(params: Params, runner, *, dims: tuple[Dim, ...], budget: int, make_uni
             write_trials(study, Path(study_dir) / "trials.json")
     trials = completed(study)
     best = best_feasible(study)
-    first = min(trials, key=lambda t: t.number)
+    first = min(trials, key=lambda t: (t.params != start, t.number))  # the starting point's trial
     goals_met = best.user_attrs.get("violation", 0.0) <= 0.0
     closest = best
     if not goals_met:  # no trial met the goals, so none was scored: nothing beats the starting point
