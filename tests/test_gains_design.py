@@ -132,6 +132,8 @@ def test_a_rod_past_its_buckling_length_is_designed_with_a_warning(tmp_path, len
     (["--set", "rod.edges=5.5"], "rod.edges: expected an integer"),
     (["--set", "rod.length=long"], "rod.length: expected a number"),
     (["--set", "rod.colour=3"], "rod.colour: unknown key"),
+    (["--set", "lqr.q_angel=3"], "--set lqr.q_angel: unknown key (did you mean lqr.q_angle?)"),  # as a file's typo is
+    (["--set", "lq.q_angle=3"], "--set lq.q_angle: unknown key (did you mean lqr.q_angle?)"),
     (["--set", "rodedges"], "expected section.key=value"),
     (["--set", "driver.supply_voltage=48"], "driver.supply_voltage: must be between 4.5 and 36"),
     (["--set", "safety.angle_limit_deg=20"], "safety.angle_limit_deg: must exceed"),
@@ -327,3 +329,11 @@ def test_a_stable_loop_is_never_printed_as_radius_1():
     assert radius_text(0.9999999991344952, 6) == "0.999999999"
     assert radius_text(0.99953, 5) == "0.99953" and radius_text(1.002886, 6) == "1.002886"
     assert radius_text(0.99996, 4) == "0.99996"
+
+
+def test_check_of_a_header_never_written_says_missing(tmp_path):
+    """It said the missing files were "not what the parameters generate"."""
+    h = tmp_path / "never.h"
+    r = rodctl("gains", "--check", "--header", str(h))
+    assert r.returncode == 1 and r.stderr.strip() == (f"rodctl gains --check: {h}, {h.with_suffix('.toml')} missing; "
+                                                      f"regenerate with: rodctl gains --header {h}")

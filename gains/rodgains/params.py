@@ -453,7 +453,7 @@ def load_params(path: str | Path | None = None, overrides: list[str] | tuple[str
     for o in overrides:
         section, key, value = _parse_override(o)
         if section not in SCHEMA or key not in SCHEMA[section]:
-            raise ParamError(f"--set {section}.{key}: unknown key")
+            raise ParamError(f"--set {section}.{key}: unknown key{_override_hint(section, key)}")
         raw.setdefault(section, {})[key] = value
     return Params(validate(raw, source=str(path)), source=str(path))
 
@@ -467,6 +467,19 @@ def _did_you_mean(section: str, key: str) -> str:
         return f" (did you mean {section}.{close[0]}?)"
     elsewhere = [s for s, keys in SCHEMA.items() if key in keys]
     return f" (it belongs in [{elsewhere[0]}])" if elsewhere else ""
+
+
+def _override_hint(section: str, key: str) -> str:
+    """_did_you_mean for a --set, whose table may be misspelled too."""
+    import difflib
+
+    if section in SCHEMA:
+        return _did_you_mean(section, key)
+    close = difflib.get_close_matches(section, list(SCHEMA), n=1, cutoff=0.75)
+    if close and key in SCHEMA[close[0]]:
+        return f" (did you mean {close[0]}.{key}?)"
+    elsewhere = [s for s, keys in SCHEMA.items() if key in keys]
+    return f" (did you mean {elsewhere[0]}.{key}?)" if elsewhere else ""
 
 
 def validate(raw: dict, source: str = "parameters", plausible: bool = True) -> dict:
@@ -630,7 +643,7 @@ class Params:
         for o in overrides:
             section, key, value = _parse_override(o)
             if section not in SCHEMA or key not in SCHEMA[section]:
-                raise ParamError(f"--set {section}.{key}: unknown key")
+                raise ParamError(f"--set {section}.{key}: unknown key{_override_hint(section, key)}")
             raw[section][key] = value
         return Params(validate(raw, source=self.source, plausible=plausible), source=self.source)
 

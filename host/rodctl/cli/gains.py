@@ -110,9 +110,11 @@ def run_gains(args) -> int:
     if args.check:
         stale = atomic_file.stale(files)
         if stale:
-            names = ", ".join(str(f) for f in stale)
-            print(f"rodctl gains --check: {names} not what the parameters generate; "
-                  f"regenerate with: {regenerate_command(args)}", file=sys.stderr)
+            missing = [str(f) for f in stale if not Path(f).exists()]
+            names = ", ".join(str(f) for f in stale if str(f) not in missing)
+            what = "; ".join(([f"{', '.join(missing)} missing"] if missing else [])
+                             + ([f"{names} not what the parameters generate"] if names else []))
+            print(f"rodctl gains --check: {what}; regenerate with: {regenerate_command(args)}", file=sys.stderr)
             return 1
         print(f"up to date: {', '.join(str(f) for f in files)}")
         return 0
