@@ -327,6 +327,13 @@ def test_sweep_refused_design_is_a_row_and_parquet_has_one_row_per_run(tmp_path,
     schema = pq.read_schema(out)
     assert {k: str(schema.field(k).type) for k in RUN_COLUMN_TYPES} == {
         k: {"float64": "double"}.get(t, t) for k, t in RUN_COLUMN_TYPES.items()}
+    # a sweep of refused points only, read with this one as one table
+    polars = pytest.importorskip("polars")
+    refused = tmp_path / "r.parquet"
+    assert main(["sweep", "--grid", "design.method=continuous", "--set", "motor.design_includes_motor=false",
+                 "--seconds", str(SECONDS), "--jobs", "1", "--out", str(refused), "--plot", ""]) == 0
+    both = polars.read_parquet([out, refused])
+    assert both.height == 3 and both["refused"].to_list() == [False, True, True]
     assert out.with_suffix(".png").exists()
     assert "1 refused" in capsys.readouterr().out
 
@@ -613,6 +620,7 @@ def test_a_score_sweep_says_each_point_s_score_and_keeps_it(tmp_path, capsys):
     assert [p["rod.edges"] for p in points] == [5, 8] and meta["cases"] == "nominal" and "case" not in meta
     for p in points:
         assert p["score"] == p["passed_runs"] / p["runs"] and p["runs"] == 2
-        assert f"  rod.edges = {p['rod.edges']}: score {p['score']:.4f} ({p['passed_runs']}/2 runs pass)" in text
+        assert (f"  rod.edges = {p['rod.edges']}: score {p['score']:.4f} ({p['passed_runs']}/2 runs pass), margin "
+                f"{p['margin']:.4f}") in text
     assert main(argv + ["--case", "E+15", "--force"]) == 2
     assert "--case picks one task's run" in capsys.readouterr().err

@@ -545,7 +545,8 @@ def test_a_frame_left_out_without_a_gap_is_a_drift_no_camera_has_and_is_said(fil
     out = tmp_path / "t.parquet"
     r = run_rodctl("track", str(video), "--log", str(d["log"]), "--out", str(out), "--quiet", timeout=300)
     assert r.returncode == 0, r.stderr
-    m = re.search(r"warning: the fitted clock drift ([+-]\d+) ppm is more than a camera's clock drifts", r.stderr)
+    m = re.search(r"warning: the fitted clock drift ([+-]\d+) ppm \(\+-\d+\) is more than a camera's clock drifts",
+                  r.stderr)
     assert m and 1000 < int(m.group(1)) < 4000, r.stderr  # 1 of 720 frames is 1389 ppm of the clip; measured 2215
     assert "frame times may be off by up to" in r.stderr
 
@@ -563,3 +564,17 @@ def test_a_rod_that_never_moves_asks_for_the_axis_instead_of_more_markers(filmed
                    timeout=300)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert "the rod hardly moves in this video: 9 of its markers hold still" in r.stderr and "--hub X,Y" in r.stderr
+
+
+def test_a_short_clip_holds_the_clock_it_cannot_measure_at_the_camera_s(filmed, tmp_path):
+    """1.5 s of the 120 fps clip: the fitted drift was -3710 ppm (a camera's: a few hundred), which put the first frame
+    4.4 ms off. The drift's own uncertainty says the clip cannot measure it, so the camera's nominal clock is held."""
+    import re
+
+    d = filmed[120]
+    video = rewrite(d["video"], tmp_path / "short.mp4", keep=lambda k: k < 180)
+    r = run_rodctl("track", str(video), "--log", str(d["log"]), "--out", str(tmp_path / "t.parquet"), timeout=300)
+    assert r.returncode == 0 and "warning" not in r.stderr, r.stderr
+    m = re.search(r"alignment: the video's first frame at ([\d.]+) s of the log, clock drift not measurable over "
+                  r"1\.5 s \(\+-\d+ ppm\), held at 0,", r.stdout)
+    assert m and abs(float(m.group(1)) - d["filming"].offset_s) <= 1 / 120, r.stdout

@@ -23,3 +23,8 @@ class DesignRefused(UserError):
     """The design would not stabilize the sampled loop (or cannot be computed)."""
 
     exit_code = 3
+
+    @property
+    def why(self) -> str:
+        """The reason alone, without the "design refused: " its messages begin with."""
+        return str(self).removeprefix("design refused: ")

@@ -135,6 +135,18 @@ def _interrupted(e: KeyboardInterrupt) -> None:
         pass
 
 
+def _stdout_reader_gone() -> bool:
+    """Whether stdout is a pipe whose reader has closed it (poll says POLLERR on the write end)."""
+    import select
+
+    try:
+        p = select.poll()
+        p.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(ev & (select.POLLERR | select.POLLHUP) for _, ev in p.poll(0))
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
 def _main(parser, args) -> int:
     import os
 
@@ -151,12 +163,15 @@ def _main(parser, args) -> int:
     except KeyboardInterrupt as e:
         _interrupted(e)
         return 130
-    except BrokenPipeError:  # `rodctl check | head`: the reader left; the work was cut short, as SIGPIPE would say
-        try:
-            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at the exit's flush
-        except (OSError, ValueError):
-            pass
-        return 141
+    except BrokenPipeError as e:
+        if _stdout_reader_gone():  # `rodctl check | head`: the work was cut short, as SIGPIPE says for other tools
+            try:
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at the exit's flush
+            except (OSError, ValueError):
+                pass
+            return 141
+        print(f"rodctl: {e.strerror or e}", file=sys.stderr)  # another pipe (a worker's, a socket): not the reader's
+        return 1
     except OSError as e:  # the system refused a file or a stream (a name too long, a full disk): not a bug of ours
         import errno
 

@@ -14,6 +14,7 @@ from rodctl.paths import shown
 def run_sweep(args) -> int:
     from rodgains.errors import InputError
 
+    from rodctl.robust import score as S
     from rodctl.robust import sweep as W
     from rodctl.sim.matrix import CASES
 
@@ -50,8 +51,8 @@ def run_sweep(args) -> int:
         print(f"{n_points} grid points scored, {n_ref} refused  [{sweep.wall_s:.1f} s]")
         for pt in sweep.points:
             where = ", ".join(f"{k} = {pt[k]}" for k in sweep.names)
-            print(f"  {where}: " + ("design refused" if pt["refused"] else
-                                    f"score {pt['score']:.4f} ({pt['passed_runs']}/{pt['runs']} runs pass)"))
+            print(f"  {where}: " + (pt["reason"] if pt["refused"] else
+                                    S.Score(pt["passed_runs"], pt["runs"], pt["margin"]).text()))
     else:
         print(f"{n_points} grid points: {n_ok} pass, {n_points - n_ok - n_ref} fail, "
               f"{n_ref} refused  [{sweep.wall_s:.1f} s]")

@@ -134,7 +134,7 @@ def run_track_command(args) -> int:
           f"{r.m_per_px * 1e3:.4f} mm/px")
     print(f"frames: {q['good']} {QUALITY_TEXT[0]}, {q['filled']} with {QUALITY_TEXT[1]}, {q['repeated']} "
           f"{QUALITY_TEXT[3].replace('a ', '')}s, {q['unusable']} with {QUALITY_TEXT[2]}")
-    print(f"alignment: the video's first frame at {a.offset_s:.4f} s of the log, clock drift {a.drift_ppm:+.0f} ppm, "
+    print(f"alignment: the video's first frame at {a.offset_s:.4f} s of the log, {a.drift_text()}, "
           f"base angle correlation {a.correlation:.4f}, residual {np.degrees(a.residual_rad):.2f} deg, "
           f"camera minus encoder {np.degrees(a.angle_offset_rad):+.2f} deg")
     print("estimate minus video, per edge:")
@@ -145,7 +145,8 @@ def run_track_command(args) -> int:
         times = _panel_times(at, r.time_s, np.isfinite(r.theta).all(axis=1))
     meta = {"video": args.video, "log": args.log, "fps": r.fps, "slowdown": a.slowdown,
             "fps_note": "the rate filmed; video_time_s is the file's clock (slowdown x)",
-            "offset_s": a.offset_s, "drift_ppm": a.drift_ppm, "correlation": a.correlation, "mirrored": a.mirrored,
+            "offset_s": a.offset_s, "drift_ppm": a.drift_ppm, "drift_measured": a.drift_measured,
+            "drift_sd_ppm": a.drift_sd_ppm, "correlation": a.correlation, "mirrored": a.mirrored,
             "m_per_px": r.m_per_px, "hub_px": f"{r.hub_px[0]:.2f},{r.hub_px[1]:.2f}",
             "quality": "0 every marker seen, 1 a marker filled in, 2 too few markers, 3 a repeated frame"}
     meta.update(rest_shape_meta(r.rest_shape, r.rest_note))

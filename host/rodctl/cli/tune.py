@@ -72,7 +72,7 @@ def run_tune(args) -> int:
     try:  # the search starts from this design: one it cannot make is the user's to fix, not a trial that scores 0
         build_sil(params)
     except DesignRefused as e:
-        raise DesignRefused(f"the starting design is refused ({str(e).removeprefix('design refused: ')}); a tune searches around a design that works: "
+        raise DesignRefused(f"the starting design is refused ({e.why}); a tune searches around a design that works: "
                             "see rodctl gains --report") from None
     t0 = time.monotonic()
     with Runner(args.jobs, args.scheduler) as runner:

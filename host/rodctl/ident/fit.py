@@ -22,7 +22,6 @@ VALIDATION_FRACTION of every record never enters the fit: its percent fit is the
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -155,30 +154,19 @@ class Simulator:
         return out
 
 
-def hanging_rest(params) -> tuple[float, np.ndarray] | None:
-    """(the hub's angle where the rod hangs free [rad], each edge's angle from the hub's in that shape (N,) [rad]) of
-    the parameter file's rod on its own plant: None for a straight rod (hanging vertically). A rod curved at rest hangs bent, its hub
-    off vertical by the sag's lean; started straight, it moves at once with no torque applied (0.24 deg at the motor
-    in the first seconds at 1.0 1/m), and the fit tunes the friction and the play to a motion the rig never made."""
-    rod = params["rod"]
-    if rod["rest_curvature"] == 0.0:
+def hanging_rest(params):
+    """The parameter file's rod hanging at rest (rodctl.sim.statics.HangingShape), or None for a straight rod. A rod
+    curved at rest hangs bent, its hub off vertical by the sag's lean; started straight, it moves at once with no
+    torque applied (0.24 deg at the motor in the first seconds at 1.0 1/m), and the fit tunes the friction and the
+    play to a motion the rig never made."""
+    if params["rod"]["rest_curvature"] == 0.0:
         return None
-    key = json.dumps([rod, params["plant"]["model"], params["plant"]["edges"], params["plant"]["hub_length"]],
-                     sort_keys=True, default=str)
-    if key not in _HANGING:
-        from rodctl.sim.statics import hanging_shape
+    from rodctl.sim.statics import hanging_shape
 
-        hub, bend = hanging_shape(params)
-        if len(_HANGING) > 64:  # one per rod the search visits; its Jacobian's columns share one
-            _HANGING.clear()
-        _HANGING[key] = (hub, bend)
-    return _HANGING[key]
+    return hanging_shape(params)
 
 
-_HANGING: dict[str, tuple[float, np.ndarray]] = {}
-
-
-def set_start(plant, theta_enc: float, rest: tuple[float, np.ndarray] | None = None) -> None:
+def set_start(plant, theta_enc: float, rest=None) -> None:
     """The rig at rest with its encoder side at theta_enc [rad, zero removed] (Plant.start_hanging), the rod in its
     hanging shape (`rest`: hanging_rest's; None: straight). A record starts where the last experiment left the rig,
     most often with the motor on a flank and the rod a few tenths of a degree off hanging; starting the rod at the

@@ -60,10 +60,10 @@ def _wait_rest(session, say: Callable[[str], None], settle: float = 0.0, log_dir
         else:
             still_since = None
         time.sleep(0.02)
-    rate = f"{abs(t.base_rate):.2f} rad/s at the end, " if t is not None else ""
+    rate = f"|base rate| {abs(t.base_rate):.2f} rad/s at the end; " if t is not None else ""
     kept = (f"; the logs so far are in {log_dir} (rodctl identify LOG ... fits them)" if log_dir is not None
             and any(log_dir.glob("identify-*.csv")) else "")
-    raise UserError(f"the rod did not come to rest within {REST_TIMEOUT_S:g} s (|base rate| {rate}at rest under "
+    raise UserError(f"the rod did not come to rest within {REST_TIMEOUT_S:g} s ({rate}at rest: under "
                     f"{REST_RATE_RAD_S} rad/s): is it free to hang still? The motor is off{kept}")
 
 

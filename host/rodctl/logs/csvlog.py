@@ -87,7 +87,8 @@ class CsvSink:
         self._write(self._e, "".join([_line(self.efmts, r) for r in rows]))
 
     def abandon(self) -> None:
-        """After a refused write: the files as they are (rows end on a line; the sidecar has no trailer)."""
+        """After a refused write: the files as they are (the last row may be cut, which the reader skips; the sidecar
+        has no trailer)."""
         for f in (self._f, self._e):
             try:
                 f.close()

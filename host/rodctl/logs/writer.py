@@ -138,8 +138,6 @@ class LogWriter:
         self.n = int(n if n is not None else metadata.get("n_edges", 0))
         self.flush_interval = FLUSH_INTERVAL_S[self.format] if flush_interval is None else flush_interval
         self.rows = 0  # telemetry rows
-        self.written_rows = 0  # of them, in the file
-        self.written_until_s = 0.0  # the last written row's device time [s]
         self.failure: OSError | None = None  # the write the system refused; nothing is written after it
         self.events = 0
         self.heartbeat_acks = 0  # OK acks of heartbeats: counted in the trailer, not written as events
@@ -156,9 +154,15 @@ class LogWriter:
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._sink = sink(self.path, self.metadata, self.n)
-        except OSError as e:
+        except OSError as e:  # the header's own write refused: nothing of this log stays (a re-run is not "exists")
+            for f in files_of(self.path, self.format):
+                if f.is_file():
+                    f.unlink(missing_ok=True)
+            if e.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+                raise LogWriteFailed(f"{refused_text(e)}: {self.path} was not written") from None
             raise InputError(f"cannot write {self.path}: {e.strerror or e}") from None
         self.closed = False
+        self._kept: tuple[int, float] | None = None  # after a refused write: (rows, seconds) a reader finds
 
     @property
     def telemetry_rows(self) -> int:
@@ -166,6 +170,8 @@ class LogWriter:
 
     # --- rows -------------------------------------------------------------------------------
     def _added(self) -> None:
+        if self.failure is not None:  # the file is closed: what is received goes nowhere
+            return
         if time.monotonic() - self._last_flush >= self.flush_interval or len(self._buf) >= 20000:
             self._flush_locked()
 
@@ -273,13 +279,11 @@ class LogWriter:
     # --- file -------------------------------------------------------------------------------
     def _flush_locked(self) -> None:
         if self.failure is not None:
-            raise LogWriteFailed(self.failure_text())
+            raise LogWriteFailed(self._refused())
         try:
             if self._buf:
                 rows, self._buf = self._buf, []
                 self._sink.write_rows(rows)
-                self.written_rows += len(rows)
-                self.written_until_s = rows[-1][0]
             if self._ebuf:
                 ev, self._ebuf = self._ebuf, []
                 self._sink.write_events(ev)
@@ -288,20 +292,21 @@ class LogWriter:
         self._last_flush = time.monotonic()
 
     def _failed(self, e: OSError) -> None:
-        """Stop at the first refused write: nothing more is written, and the rows kept are the log (lock held)."""
-        self.failure = e
+        """Stop at the first refused write (lock held; on the thread that receives the frames, under the session's
+        lock): nothing more is written. Only the sink is closed here; what the file keeps is read later, on the
+        main thread once the board is disarmed (failure_text): a long log takes seconds to read."""
         self._buf, self._ebuf, self._held = [], [], None
         self.closed = True
         self._sink.abandon()
-        self.written_rows, self.written_until_s = self._readable()
-        if not self.written_rows:
-            for f in files_of(self.path, self.format):
-                f.unlink(missing_ok=True)
-        raise LogWriteFailed(self.failure_text()) from None
+        self.failure = e  # last: whoever sees it finds the sink closed
+        raise LogWriteFailed(self._refused()) from None
+
+    def _refused(self) -> str:
+        return f"{refused_text(self.failure)} writing {self.path}"
 
     def _readable(self) -> tuple[int, float]:
-        """(rows, last device time [s]) a reader finds in what the failed write left: the rows the file holds, not
-        the ones sent to it (an MCAP chunk or a CSV line may have been cut)."""
+        """(rows, their span [s]) a reader finds in what the failed write left: the rows the file holds, not the
+        ones sent to it (an MCAP chunk still in memory, or a CSV line cut, is not in it)."""
         import contextlib
         import io
 
@@ -315,11 +320,17 @@ class LogWriter:
         return (len(t), float(t[-1])) if len(t) else (0, 0.0)
 
     def failure_text(self) -> str:
-        """One line: what the system refused, and what is left of the log."""
+        """One line: what the system refused, and what is left of the log. It reads the file (once), and removes a
+        log that holds no row: call it once the board is disarmed."""
+        if self._kept is None:
+            self._kept = self._readable()
+            if not self._kept[0]:
+                for f in files_of(self.path, self.format):
+                    f.unlink(missing_ok=True)
+        rows, span_s = self._kept
         what = refused_text(self.failure)
-        if self.written_rows:
-            left = (f"{self.path} keeps its first {self.written_rows} rows ({self.written_until_s:.1f} s), cut short "
-                    "(plot and log-convert read it)")
+        if rows:
+            left = f"{self.path} keeps its first {rows} rows ({span_s:.1f} s), cut short (plot and log-convert read it)"
         elif self.format == "parquet":
             left = (f"nothing was kept of {self.path} (a Parquet file cannot be read before its end; "
                     "CSV and MCAP logs keep what was written)")
@@ -339,7 +350,7 @@ class LogWriter:
         """Write everything received so far (the latest row too, without waiting for its IMU frame)."""
         with self._lock:
             if self.failure is not None:
-                raise LogWriteFailed(self.failure_text())
+                raise LogWriteFailed(self._refused())
             if not self.closed:
                 self._release_held()
                 self._flush_locked()
@@ -347,8 +358,8 @@ class LogWriter:
     def maybe_flush(self) -> None:
         """The periodic write: the latest row stays back for its IMU frame. LogWriteFailed once a write was refused
         (here or on the thread that receives the frames)."""
-        if self.failure is not None:
-            raise LogWriteFailed(self.failure_text())
+        if self.failure is not None:  # the short line: the caller disarms first, then asks failure_text()
+            raise LogWriteFailed(self._refused())
         if time.monotonic() - self._last_flush >= self.flush_interval:
             with self._lock:
                 if not self.closed:
@@ -357,14 +368,24 @@ class LogWriter:
     def close(self, trailer: dict | None = None, *, verbatim: bool = False) -> Path:
         """Write what is left and the trailer (counters). Returns the log path. verbatim: `trailer` is the
         whole trailer, as is (a converted log's; {} or None: none, so the log still reads as cut short),
-        without this writer's close time and counts. LogWriteFailed when a write was refused (then or before)."""
+        without this writer's close time and counts. LogWriteFailed when a write was refused, then or before
+        (failure_text: read once the frames' thread is off this writer, as the session's listener removed)."""
+        if not self._close_locked(trailer, verbatim):
+            raise LogWriteFailed(self.failure_text())  # outside the lock: it reads the file
+        return self.path
+
+    def _close_locked(self, trailer: dict | None, verbatim: bool) -> bool:
+        """close() under the lock; False when a write was refused."""
         with self._lock:
             if self.failure is not None:
-                raise LogWriteFailed(self.failure_text())
+                return False
             if self.closed:
-                return self.path
-            self._release_held()
-            self._flush_locked()
+                return True
+            try:
+                self._release_held()
+                self._flush_locked()
+            except LogWriteFailed:
+                return False
             if verbatim:
                 tr = {k: str(v) for k, v in (trailer or {}).items()}
             else:
@@ -375,10 +396,13 @@ class LogWriter:
                 tr.update({k: str(v) for k, v in (trailer or {}).items()})
             try:
                 self._sink.close(tr)
-            except OSError as e:
-                self._failed(e)
+            except Exception as e:  # noqa: BLE001 - pyarrow raises its own kinds on a closing write too
+                try:
+                    self._failed(e if isinstance(e, OSError) else OSError(errno.EIO, str(e)))
+                except LogWriteFailed:
+                    return False
             self.closed = True
-        return self.path
+            return True
 
 
 def attach_device_log(session, path: str | Path, *, params=None, params_source: str = "unknown", fmt: str | None = None,

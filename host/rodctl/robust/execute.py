@@ -94,8 +94,7 @@ def run_unit(unit: Unit) -> dict[str, Any]:
             result = run_case(params, unit.case, unit.task, seconds=unit.seconds, plant_params=plant)
         row.update(result)
     except DesignRefused as e:
-        why = str(e)  # the design's own messages begin "design refused: "; others are prefixed here once
-        row.update(passed=False, refused=True, reason=why if why.startswith("design refused") else f"design refused: {why}")
+        row.update(passed=False, refused=True, reason=f"design refused: {e.why}")
     except ParamError as e:
         row.update(passed=False, refused=True, reason=f"invalid parameters: {e}")
     except SimulationError as e:

@@ -22,6 +22,8 @@ RUN_COLUMN_TYPES = {
     "settle_s": "float64", "final_dev_deg": "float64", "held_fraction": "float64", "max_dev_deg": "float64",
     "peak_torque_Nm": "float64", "caught_at_s": "float64", "fault": "bool", "fault_reason": "int64",
     "base_turns_max": "float64", "est_rms_deg": "float64", "simulated_s": "float64", "passed": "bool",
+    "title": "string", "criterion": "string", "plant": "string", "buckling_ratio": "float64",
+    "straightest_deg": "float64", "plant_sha256": "string", "kind": "string", "draw": "int64", "point": "int64",
 }
 
 

@@ -191,9 +191,11 @@ def open_study(study_dir: str | None, meta: dict, sampler_seed: int):
     from optuna.storages.journal import JournalFileBackend
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    sampler = optuna.samplers.TPESampler(seed=sampler_seed, multivariate=True)
+
+    def sampler(seed: int):
+        return optuna.samplers.TPESampler(seed=seed, multivariate=True)
     if study_dir is None:
-        return optuna.create_study(study_name=STUDY_NAME, direction="maximize", sampler=sampler)
+        return optuna.create_study(study_name=STUDY_NAME, direction="maximize", sampler=sampler(sampler_seed))
     check_study(study_dir, meta)
     folder = Path(study_dir)
     folder.mkdir(parents=True, exist_ok=True)
@@ -203,13 +205,13 @@ def open_study(study_dir: str | None, meta: dict, sampler_seed: int):
 
         write_json(meta_path, meta)
     storage = JournalStorage(JournalFileBackend(str(folder / "journal.log")))
-    study = optuna.create_study(study_name=STUDY_NAME, direction="maximize", sampler=sampler, storage=storage,
-                                load_if_exists=True)
+    study = optuna.create_study(study_name=STUDY_NAME, direction="maximize", sampler=sampler(sampler_seed),
+                                storage=storage, load_if_exists=True)
     # a resumed study's sampler starts past the draws already made: seeded as new, its first random (startup)
     # draws would be those of trials #1, #2, ... again
     done = len(study.get_trials(deepcopy=False))
     if done:
-        study.sampler = optuna.samplers.TPESampler(seed=sampler_seed + done, multivariate=True)
+        study.sampler = sampler(sampler_seed + done)
     return study
 
 

@@ -188,12 +188,12 @@ class Scope:
             w, self.writer = self.writer, None
             self.s.remove_listener(w)
             w.note("recording stopped (scope)")
-            self.recorded.append(str(w.path))
             try:
                 w.close(self.s.log_trailer("scope"))
             except UserError as e:  # a full disk
-                self.message = f"recording stopped: {e}"
+                self._record_failed(w, e)
                 return
+            self.recorded.append(str(w.path))
             self.message = f"recorded {w.path}: {w.rows} frames"
             return
         a = self.args
@@ -204,6 +204,18 @@ class Scope:
                                         overwrite=bool(a.force))
         self.writer.note("recording started (scope)")
         self.message = f"recording to {path}"
+
+    def _record_failed(self, w, e) -> None:
+        """A recording the disk refused: the run it was recording ends as `rodctl log`'s does (the board disarmed),
+        and the window says what the file keeps; the scope stays open."""
+        try:
+            self.s.disarm()
+        except UserError:
+            pass  # the link's own trouble: the watchdog disarms, and the window says the link is lost
+        text = w.failure_text() if w.failure is not None else str(e)
+        if w.path.exists():
+            self.recorded.append(f"{w.path} (cut short)")
+        self.message = f"recording stopped, disarmed: {text}"
 
     def finish(self) -> None:
         if self.writer is not None:
@@ -228,10 +240,10 @@ class Scope:
         if self.writer is not None:
             try:
                 self.writer.maybe_flush()
-            except UserError as e:  # a full disk: the recording stops, the scope goes on
-                self.s.remove_listener(self.writer)
-                self.recorded.append(str(self.writer.path))
-                self.writer, self.message = None, f"recording stopped: {e}"
+            except UserError:  # a full disk
+                w, self.writer = self.writer, None
+                self.s.remove_listener(w)
+                self._record_failed(w, None)
         now = time.monotonic()
         t0, f0 = self._frames_at
         if now - t0 >= 1.0:

@@ -35,7 +35,7 @@ def reversal(p: Params, seconds: float = 6.0) -> dict[str, np.ndarray]:
     the motor side's and the hub's angles [rad] every 1 ms."""
     from rodctl.sim.plant import faithful_plant
 
-    pl = faithful_plant(p, input_mode="torque")
+    pl = faithful_plant(p, input_mode="torque", at_rest=False)
     pl.set_state(np.zeros(pl.N))
     n = int(round(seconds / 1e-3))
     t = np.arange(n) * 1e-3

@@ -50,7 +50,7 @@ def linear_plant(plant_p, imu: bool = False):
     """(A, B, C) of the faithful plant of plant_p linearized upright: torque input through the winding's
     current lag (L / R), no dry friction, the gear teeth in contact, output the encoder's angle. imu: also
     (C_imu, D_imu), the tip IMU's rows (rodctl.sim.imu.linear_rows), appended to the return."""
-    pl = faithful_plant(plant_p, input_mode="torque", coulomb=0.0)
+    pl = faithful_plant(plant_p, input_mode="torque", coulomb=0.0, at_rest=False)
     if pl.config.backlash > 0:
         pl = pl.twin(backlash=0.0)
     A, B = convergence.linearization(pl, upright=True)

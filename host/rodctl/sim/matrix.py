@@ -288,7 +288,7 @@ def simulate(design_p: Params, plant_p: Params, task: str, *, seconds: float, de
     if progress:
         progress(f"{label}: compiling the firmware", 0.0)
     ctl = SilController(build_sil(design_p))
-    pl = faithful_plant(plant_p, input_mode="duty")
+    pl = faithful_plant(plant_p, input_mode="duty", at_rest=False)  # its state is set below
     nq = pl.N
     if task == "balance":
         pl.set_state(np.full(nq, math.pi - math.radians(start_deg)), np.zeros(nq))

@@ -459,21 +459,22 @@ class Plant:
         self._lib.rod_plant_motor_state(self._h, ctypes.byref(a), ctypes.byref(b), ctypes.byref(c))
         return a.value, b.value, c.value
 
-    def start_hanging(self, motor_angle: float, rest: tuple[float, np.ndarray] | None = None) -> None:
+    def start_hanging(self, motor_angle: float, rest=None) -> None:
         """At rest with the motor side at motor_angle [rad, 0 hanging]: the rod hangs wherever the play lets it,
         its hub at its free-hanging angle if the gap around the motor side reaches that far, otherwise against the
-        nearer flank, where the motor's dry friction holds it. rest: (the free-hanging hub angle [rad], each edge's
-        angle from the hub's (N,) [rad]) of a rod curved at rest (rodctl.sim.statics.hanging_shape); None: straight,
-        hanging vertically. With the encoder on the output shaft (or no gearbox) the rod's hub is at motor_angle."""
-        h0, bend = rest if rest is not None else (0.0, 0.0)
+        nearer flank, where the motor's dry friction holds it. rest: a rod curved at rest's
+        rodctl.sim.statics.HangingShape (its bend follows the hub's angle); None: straight, hanging vertically.
+        With the encoder on the output shaft (or no gearbox) the rod's hub is at motor_angle."""
+        turns = 2.0 * math.pi * round(motor_angle / (2.0 * math.pi))  # the angle may be turns from hanging
         c = self.config
         if not c.compliant or c.encoder_on_shaft:
-            self.set_state(motor_angle + bend)
-            return
-        half = 0.5 * c.backlash
-        hanging = 2.0 * math.pi * round(motor_angle / (2.0 * math.pi)) + h0  # the angle may be turns from hanging
-        self.set_state(min(max(hanging, motor_angle - half), motor_angle + half) + bend)
-        self.set_motor_state(motor_angle)
+            hub = motor_angle
+        else:
+            half = 0.5 * c.backlash
+            hub = min(max(turns + (rest.hub_rad if rest is not None else 0.0), motor_angle - half), motor_angle + half)
+        self.set_state(hub + (rest.bend_at(hub - turns) if rest is not None else 0.0))
+        if c.compliant and not c.encoder_on_shaft:
+            self.set_motor_state(motor_angle)
 
     def set_motor_state(self, theta_m: float, omega_m: float = 0.0, current: float = 0.0) -> None:
         _check(self._lib.rod_plant_set_motor_state(self._h, float(theta_m), float(omega_m), float(current)),
@@ -796,10 +797,11 @@ def faithful_plant(params: Params, *, input_mode: str = "duty", phase: float = 0
                 imu=ImuConfig.from_params(params) if params["sensors"]["tip_imu"] else None)
     args.update(kw)
     pl = Plant(params, **args)
-    if at_rest and params["rod"]["rest_curvature"] != 0.0:
+    # started straight, a bent rod would swing with nothing applied (a plant of other edges than the file's: as is)
+    if at_rest and params["rod"]["rest_curvature"] != 0.0 and not {"kind", "edges", "hub_length"} & kw.keys():
         from rodctl.sim.statics import hanging_shape
 
-        pl.start_hanging(0.0, hanging_shape(params))  # started straight, the bent rod would swing with nothing applied
+        pl.start_hanging(0.0, hanging_shape(params))
     return pl
 
 

@@ -176,7 +176,7 @@ def firmware_run(label: str, design: Params, plant: Params, *, theta0, arm_mode:
         progress(f"{label}: compiling the firmware", 0.0)  # cached after the first build of these parameters
     ctl = SilController(build_sil(design))
     if faithful:
-        pl = faithful_plant(plant, input_mode=input_mode)
+        pl = faithful_plant(plant, input_mode=input_mode, at_rest=False)  # its state is set below
     else:
         pl = Plant(plant, kind=kind, edges=edges, input_mode=input_mode)
     N = pl.N

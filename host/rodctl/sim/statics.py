@@ -91,13 +91,39 @@ def hanging_nodes(params: Params, hub_deg: float = 0.0) -> np.ndarray:
     return fam.plant.nodes()
 
 
-def hanging_shape(params: Params) -> tuple[float, np.ndarray]:
-    """(the hub's angle from vertical where the rod hangs free, no torque at its hub [rad]; each edge's angle from the
-    hub's in that shape (N,) [rad]), on the parameter file's own plant: where a rod curved at rest comes to rest."""
-    fam = _Family(params, about=0.0)
-    shape = _zero_torque(fam)  # leaves the plant in that shape
-    theta, _ = fam.plant.state()
-    return math.radians(shape.hub_deg), np.asarray(theta - theta[0], float)
+class HangingShape(NamedTuple):
+    """A rod curved at rest, hanging: where its hub hangs free, and its bend for a hub held near there."""
+
+    hub_rad: float  # the hub's angle from vertical where it hangs free, no torque at the hub [rad]
+    bend_rad: np.ndarray  # each edge's angle from the hub's, in that shape (N,) [rad]
+    bend_per_rad: np.ndarray  # how that bend changes per rad of the hub held away from hub_rad (N,) [rad/rad]
+
+    def bend_at(self, hub_rad: float) -> np.ndarray:
+        """Each edge's angle from the hub's with the hub held at hub_rad [rad] (within a few degrees of hub_rad:
+        the bend is linear in the hub's angle there)."""
+        return self.bend_rad + (hub_rad - self.hub_rad) * self.bend_per_rad
+
+
+_HANGING: dict[str, HangingShape] = {}
+STEP_DEG = 0.5  # the hub's step for bend_per_rad [deg]
+
+
+def hanging_shape(params: Params) -> HangingShape:
+    """The hanging rod's HangingShape on the parameter file's own plant (once per parameter file): where a rod
+    curved at rest comes to rest, and its shape with the hub held on a flank of the gearbox's play."""
+    key = params.sha256()
+    if key not in _HANGING:
+        fam = _Family(params, about=0.0)
+        shape = _zero_torque(fam)  # leaves the plant in that shape
+        theta, _ = fam.plant.state()
+        fam.shape(shape.hub_deg + STEP_DEG)
+        theta_up, _ = fam.plant.state()
+        bend, bend_up = theta - theta[0], theta_up - theta_up[0]
+        if len(_HANGING) > 64:  # one per rod a fit visits
+            _HANGING.clear()
+        _HANGING[key] = HangingShape(math.radians(shape.hub_deg), np.asarray(bend, float),
+                                     np.asarray((bend_up - bend) / math.radians(STEP_DEG), float))
+    return _HANGING[key]
 
 
 def hanging_tip_offset_m(params: Params) -> float:

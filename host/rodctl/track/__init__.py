@@ -276,7 +276,8 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     base = base_tangent(markers_m, length)
     base[ok] = np.unwrap(base[ok])
     slowdowns = (filmed_fps / video.fps,) if filmed_fps is not None else SLOWDOWNS
-    al = align(tau[ok], base[ok], t_log, th_log, video.fps, slowdowns)
+    play = p["gearbox"]["backlash_deg"] if p["encoder"]["location"] == "motor" else 0.0
+    al = align(tau[ok], base[ok], t_log, th_log, video.fps, slowdowns, play_deg=play)
     if al.drift_warning():
         warnings.append(al.drift_warning())
     if al.covered < COVERED_WARN:

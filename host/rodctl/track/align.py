@@ -17,6 +17,7 @@ the wrong lag).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,6 +33,7 @@ PLAUSIBLE_DRIFT_PPM = 1000.0  # a fitted drift past this is not the camera's clo
 # centroids' noise: 0.2 to 1.2 deg RMS on every clip of the filming guide, blurred, noisy or recompressed. A best fit
 # 3 deg off is another run's log, or a clip too short to place in it (a 1 s clip fitted a half-swing away, 7.3 deg).
 MAX_RESIDUAL_DEG = 3.0
+GUIDE_CLIP_S = 6.0  # the swinging the filming guide asks for, at 120 fps and up [s]
 # A slow-motion file plays slower than it was filmed: a phone films at 60 to 960 fps and writes a file that
 # plays at 24, 25, 30 or 60. Its container's clock runs this many times slower than the log's [-]; each is
 # tried (1 first) and the best correlation wins: a swing slowed by the wrong factor has the wrong period.
@@ -57,20 +59,27 @@ class Alignment:
     covered_s: float = 0.0  # the video time they span, over which the drift is measured [s]
     mirrored: bool = False  # the camera sees the rod turn against the encoder: its angles were negated
     slowdown: float = 1.0  # the video's seconds per second filmed: a slow-motion file's factor [-]
+    drift_measured: bool = True  # False: the clip cannot tell its drift from 0, which it is held at
+    drift_sd_ppm: float = 0.0  # the fitted drift's standard deviation, before any holding [ppm]
 
     @property
     def drift_ppm(self) -> float:
         return (self.rate - 1.0) * 1e6
 
+    def drift_text(self) -> str:
+        return (f"clock drift {self.drift_ppm:+.0f} ppm" if self.drift_measured else
+                f"clock drift not measurable over {self.covered_s:.1f} s (+-{2 * self.drift_sd_ppm:.0f} ppm), held at 0")
+
     def drift_warning(self) -> str | None:
-        """What a fitted drift beyond a camera clock's (PLAUSIBLE_DRIFT_PPM) means, and what it may cost; None
+        """What a measured drift beyond a camera clock's (PLAUSIBLE_DRIFT_PPM) means, and what it may cost; None
         within it."""
-        if abs(self.drift_ppm) <= PLAUSIBLE_DRIFT_PPM:
+        if not self.drift_measured or abs(self.drift_ppm) <= PLAUSIBLE_DRIFT_PPM:
             return None
         ms = abs(self.drift_ppm) * 1e-6 * self.covered_s / 2 * 1e3
-        return (f"the fitted clock drift {self.drift_ppm:+.0f} ppm is more than a camera's clock drifts (a few hundred "
-                f"ppm): frames left out without a gap in their timestamps, or too little motion of the base over "
-                f"{self.covered_s:.1f} s to measure it; frame times may be off by up to {ms:.1f} ms at the clip's ends")
+        return (f"the fitted clock drift {self.drift_ppm:+.0f} ppm (+-{2 * self.drift_sd_ppm:.0f}) is more than a "
+                f"camera's clock drifts (a few hundred ppm): frames left out without a gap in their timestamps, or too "
+                f"little motion of the base over {self.covered_s:.1f} s to time the clip; frame times may be off by up "
+                f"to {ms:.1f} ms at the clip's ends")
 
     def log_time(self, video_t: np.ndarray) -> np.ndarray:
         """The log's time [s] of the video's times video_t [s, the file's clock]."""
@@ -111,11 +120,13 @@ def _coarse(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.nda
 
 
 def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarray, fps: float,
-          slowdowns: tuple[float, ...] = SLOWDOWNS) -> Alignment:
+          slowdowns: tuple[float, ...] = SLOWDOWNS, play_deg: float = 0.0) -> Alignment:
     """tau: video times of the usable frames [s, the file's clock]; beta: the rod's base angle in them
     [rad] (unwrapped; rodctl.track.shape.base_tangent); t_log, th_log: the log's time [s] and encoder
     angle [rad]; fps: the file's frame rate [1/s]; slowdowns: the slow-motion factors to try (the
-    file's seconds per second filmed). A mirrored video's alignment is of -beta (Alignment.mirrored)."""
+    file's seconds per second filmed); play_deg: the gearbox's play between the encoder and the rod [deg], which
+    the camera's base angle may differ by on top of MAX_RESIDUAL_DEG. A mirrored video's alignment is of -beta
+    (Alignment.mirrored)."""
     from scipy.optimize import least_squares
 
     if len(tau) < 20:
@@ -155,7 +166,18 @@ def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarr
     fit = least_squares(resid, [offset0, 1.0, c0], x_scale=[1.0 / fps, 1e-4, 0.01], loss="soft_l1",
                         f_scale=np.radians(2.0), bounds=fit_bounds)
     off, rate, c = (float(v) for v in fit.x)
-    _refuse_at_limit(off - offset0, span, rate - 1.0, drift_max)
+    _refuse_at_limit(off - offset0, span, rate - 1.0, drift_max)  # pinned at a bound: no clock fits the frames
+    sd_ppm = _drift_sd(fit) * 1e6
+    measured = 2 * sd_ppm <= PLAUSIBLE_DRIFT_PPM
+    if not measured:
+        # the clip cannot tell a camera's drift (a few hundred ppm) from none: a rate fitted anyway is the frames'
+        # noise (a 2 s clip: +1100 ppm against the 60 put in), so the camera's nominal clock is taken
+        def resid0(p):
+            return resid([p[0], 1.0, p[1]])
+        fit0 = least_squares(resid0, [offset0, c0], x_scale=[1.0 / fps, 0.01], loss="soft_l1",
+                             f_scale=np.radians(2.0), bounds=([offset0 - span, -np.inf], [offset0 + span, np.inf]))
+        off, rate, c = float(fit0.x[0]), 1.0, float(fit0.x[1])
+        _refuse_at_limit(off - offset0, span, 0.0, drift_max)
     inside = _inside(off + rate * tau, t_log, 0.0)
     model = np.interp(off + rate * tau[inside], t_log, th_log) + c
     r = float(np.corrcoef(beta[inside], model)[0, 1]) if inside.sum() > 2 else 0.0
@@ -163,12 +185,44 @@ def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarr
         raise InputError(f"the video's base angle does not follow the log's (correlation {r:.2f} < "
                          f"{MIN_CORRELATION}): a log of another run?")
     res = float(np.sqrt(np.mean((beta[inside] - model) ** 2)))
-    if res > np.radians(MAX_RESIDUAL_DEG):
+    max_residual_deg = MAX_RESIDUAL_DEG + 0.5 * play_deg
+    if res > np.radians(max_residual_deg):
+        why = (f"a clip of {np.ptp(tau):.1f} s is too short to place in the log (film 6 s or more of swinging)"
+               if np.ptp(tau) < GUIDE_CLIP_S else "frames left out of the video")
         raise InputError(f"the video's base angle follows the log's only loosely at the best fit ({np.degrees(res):.1f} "
-                         f"deg RMS, more than {MAX_RESIDUAL_DEG:g}; camera minus encoder {np.degrees(c):+.1f} deg): a clip "
-                         f"of {np.ptp(tau):.1f} s is too short to place in the log (film 6 s or more of swinging), or "
-                         "a log of another run?")
-    return Alignment(off, rate, c, r, res, float(inside.mean()), float(np.ptp(tau[inside])), mirrored, slowdown)
+                         f"deg RMS, more than {max_residual_deg:g}; camera minus encoder {np.degrees(c):+.1f} deg): {why}, "
+                         "or a log of another run?")
+    return Alignment(off, rate, c, r, res, float(inside.mean()), float(np.ptp(tau[inside])), mirrored, slowdown,
+                     measured, sd_ppm)
+
+
+def _drift_sd(fit) -> float:
+    """The fitted rate's standard deviation [-] from the fit's Gauss-Newton covariance (its residuals' variance times
+    (J^T J)^-1), widened by the residuals' correlation time: they are the play's and the foot's bend, smooth over many
+    frames, not independent per frame (white, a 2 s clip's +1100 ppm read as +-270 against the 60 put in). inf where
+    the Jacobian cannot tell the rate."""
+    J = np.asarray(fit.jac, float)
+    res = np.asarray(fit.fun, float)
+    dof = max(1, J.shape[0] - J.shape[1])
+    s2 = 2.0 * float(fit.cost) / dof
+    try:
+        cov = s2 * np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:
+        return float("inf")
+    return float(np.sqrt(max(cov[1, 1], 0.0) * _correlation_samples(res)))
+
+
+def _correlation_samples(res: np.ndarray) -> float:
+    """How many consecutive residuals count as one independent one: twice the lag at which their autocorrelation
+    falls below 1/e (at least 1, at most a tenth of them)."""
+    x = res - res.mean()
+    n = len(x)
+    if n < 10 or not np.any(x):
+        return 1.0
+    ac = np.correlate(x, x, mode="full")[n - 1:] / float(x @ x)
+    below = np.nonzero(ac[: max(2, n // 10)] < math.exp(-1.0))[0]
+    lag = int(below[0]) if below.size else n // 10
+    return float(max(1, 2 * lag))
 
 
 def _inside(t: np.ndarray, t_log: np.ndarray, margin_s: float) -> np.ndarray:
