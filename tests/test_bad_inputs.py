@@ -670,8 +670,8 @@ def test_check_of_a_header_that_is_not_text_says_it_is_stale(tmp_path):
     png.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(range(256)))
     r = run_rodctl("gains", "--header", str(png), "--check")
     assert r.returncode == 1 and "Traceback" not in r.stderr
-    assert _one_line(r).startswith(f"rodctl gains --check: {png}, {png.with_suffix('.toml')} not what the parameters "
-                                   "generate; regenerate with: ")
+    assert _one_line(r).startswith(f"rodctl gains --check: {png.with_suffix('.toml')} missing; {png} not what the "
+                                   "parameters generate; regenerate with: ")
 
 
 # An empty name (an unset shell variable) is refused with the option's name, never taken for the default name,
