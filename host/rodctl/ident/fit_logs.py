@@ -139,6 +139,9 @@ def fit_logs(logs: list[Path], params=None, source: str = "", *, nominal, out: P
     show(f"identified in {res.seconds:.1f} s ({res.evaluations} simulations); "
          f"theta_1 residual {res.rms_counts:.2f} counts RMS; validation (held-out {100 * F.VALIDATION_FRACTION:g} %): "
          f"{F.validation_text(res.validation_fit_pct)}")
+    miss = F.model_miss_text(res.rms_counts)
+    if miss:
+        say(f"rodctl: warning: {miss}")
     show("\n".join(F.report_lines(res)))
     show("identifiability:")
     show("\n".join("  " + s for s in F.identifiability_text(res)))
