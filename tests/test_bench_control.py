@@ -14,10 +14,11 @@ from rodctl.sim import matrix as M
 def _fake_run_case(final_deg: float, torque_nm: float):
     def run_case(params, case, task, keep_log=False, **kw):
         r = {"settle_s": 0.7 if task == "balance" else 1.55, "caught_at_s": 0.93 if task == "swingup" else None,
-             "final_dev_deg": final_deg, "fault_reason": 0}
+             "final_dev_deg": final_deg, "fault_reason": 0, "fault": False}
         if keep_log:
             t = np.arange(0.0, 12.0, 1e-3)
-            r["log"] = {"time": t, "torque": np.where(np.arange(t.size) % 2, torque_nm, -torque_nm)}
+            r["log"] = {"time": t, "torque": np.where(np.arange(t.size) % 2, torque_nm, -torque_nm),
+                        "theta": np.full((t.size, 8), np.pi)}  # upright throughout
         return r
 
     return run_case
@@ -56,7 +57,8 @@ def test_control_goals_are_reported_with_verdicts_and_a_miss_exits_1(monkeypatch
                    "matrix_runs_passing": 70, "matrix_runs": 72, "backlash3_final_deg": 4.2,
                    "zero_place_worst_final_deg": 8.3, "longest_rod_ratio": 1.1,
                    "longest_rod_ratio_imu": 1.0, "longest_rod_ratio_imu_no_play": 1.3,
-                   "imu_own_design_e_minus15_final_deg": 0.8, "imu_own_design_rho_plus15_final_deg": 0.8}
+                   "imu_own_design_e_minus15_final_deg": 0.8, "imu_own_design_rho_plus15_final_deg": 0.8,
+                   "curved_own_design_within_4deg_s": 0.0}  # the fake rod is upright from its first sample
     assert walks == [(False, 1.0), (True, 1.0), (True, 0.0)]  # base only, then the IMU with and without the play
     assert sorted({z for z, _ in zeros}) == [0.0, 0.045, 0.09, 0.135, 0.18, 0.27] and len(zeros) == 12  # both tasks
     lines = {line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line.strip()}
@@ -67,6 +69,7 @@ def test_control_goals_are_reported_with_verdicts_and_a_miss_exits_1(monkeypatch
     assert "MISSED" in lines["longest_rod_ratio_imu"] and " ok " in lines["longest_rod_ratio_imu_no_play"]
     assert "MISSED" not in lines["matrix_runs_passing"]  # a count, no goal: the play makes it a share
     assert " ok " in lines["imu_own_design_e_minus15_final_deg"] and "(goal <= 3 deg)" in lines["imu_own_design_e_minus15_final_deg"]
+    assert " ok " in lines["curved_own_design_within_4deg_s"] and "(goal <= 5 s)" in lines["curved_own_design_within_4deg_s"]
 
 
 def test_control_quick_skips_the_matrix_and_the_longest_rod(monkeypatch):
