@@ -136,7 +136,9 @@ class Simulator:
         zero = math.radians(params["encoder"]["zero_error_deg"])
         out = []
         fp = ctypes.POINTER(ctypes.c_float)
-        rest = hanging_rest(params)
+        from rodctl.sim.statics import hanging_shape
+
+        rest = hanging_shape(params)  # a rod curved at rest starts each record bent, as it hangs (None: straight)
         for i, (r, duty, torque) in enumerate(zip(self.records, self._duty, self._torque)):
             within = 0.0 if starts is None else float(starts[i])
             theta0 = 2 * math.pi * (r.count[0] + within) / cpr - zero
@@ -154,21 +156,9 @@ class Simulator:
         return out
 
 
-def hanging_rest(params):
-    """The parameter file's rod hanging at rest (rodctl.sim.statics.HangingShape), or None for a straight rod. A rod
-    curved at rest hangs bent, its hub off vertical by the sag's lean; started straight, it moves at once with no
-    torque applied (0.24 deg at the motor in the first seconds at 1.0 1/m), and the fit tunes the friction and the
-    play to a motion the rig never made."""
-    if params["rod"]["rest_curvature"] == 0.0:
-        return None
-    from rodctl.sim.statics import hanging_shape
-
-    return hanging_shape(params)
-
-
 def set_start(plant, theta_enc: float, rest=None) -> None:
     """The rig at rest with its encoder side at theta_enc [rad, zero removed] (Plant.start_hanging), the rod in its
-    hanging shape (`rest`: hanging_rest's; None: straight). A record starts where the last experiment left the rig,
+    hanging shape (`rest`: rodctl.sim.statics.hanging_shape's; None: straight). A record starts where the last experiment left the rig,
     most often with the motor on a flank and the rod a few tenths of a degree off hanging; starting the rod at the
     encoder's angle instead puts it up to half the gap off its rest, and the fit then tunes the friction to a swing
     the rig never made."""

@@ -798,10 +798,12 @@ def faithful_plant(params: Params, *, input_mode: str = "duty", phase: float = 0
     args.update(kw)
     pl = Plant(params, **args)
     # started straight, a bent rod would swing with nothing applied (a plant of other edges than the file's: as is)
-    if at_rest and params["rod"]["rest_curvature"] != 0.0 and not {"kind", "edges", "hub_length"} & kw.keys():
+    if at_rest and not {"kind", "edges", "hub_length"} & kw.keys():
         from rodctl.sim.statics import hanging_shape
 
-        pl.start_hanging(0.0, hanging_shape(params))
+        rest = hanging_shape(params)
+        if rest is not None:
+            pl.start_hanging(0.0, rest)
     return pl
 
 

@@ -14,6 +14,7 @@ the rod's shape depends only on the hub's angle), continued from the straight up
 
 from __future__ import annotations
 
+import json
 import math
 from typing import NamedTuple
 
@@ -108,10 +109,14 @@ _HANGING: dict[str, HangingShape] = {}
 STEP_DEG = 0.5  # the hub's step for bend_per_rad [deg]
 
 
-def hanging_shape(params: Params) -> HangingShape:
-    """The hanging rod's HangingShape on the parameter file's own plant (once per parameter file): where a rod
-    curved at rest comes to rest, and its shape with the hub held on a flank of the gearbox's play."""
-    key = params.sha256()
+def hanging_shape(params: Params) -> HangingShape | None:
+    """The hanging rod's HangingShape on the parameter file's own plant: where a rod curved at rest comes to rest, and
+    its shape with the hub held on a flank of the gearbox's play; None for a straight rod (hanging vertically). Solved
+    once per rod: the statics read only [rod], [plant] and [sensors] (an IMU's mass), so the many files of a fit that
+    differ in the motor or the gearbox share one."""
+    if params["rod"]["rest_curvature"] == 0.0:
+        return None
+    key = json.dumps([params.values[s] for s in ("rod", "plant", "sensors")], sort_keys=True, default=str)
     if key not in _HANGING:
         fam = _Family(params, about=0.0)
         shape = _zero_torque(fam)  # leaves the plant in that shape

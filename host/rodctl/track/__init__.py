@@ -278,8 +278,9 @@ def track(video_path: str | Path, log_path: str | Path, params, *, markers: int 
     slowdowns = (filmed_fps / video.fps,) if filmed_fps is not None else SLOWDOWNS
     play = p["gearbox"]["backlash_deg"] if p["encoder"]["location"] == "motor" else 0.0
     al = align(tau[ok], base[ok], t_log, th_log, video.fps, slowdowns, play_deg=play)
-    if al.drift_warning():
-        warnings.append(al.drift_warning())
+    drift_warning = al.drift_warning()
+    if drift_warning:
+        warnings.append(drift_warning)
     if al.covered < COVERED_WARN:
         warnings.append(f"the log covers {100 * al.covered:.0f} % of the video's usable frames ({al.covered_s:.1f} s): "
                         "only those are compared, and the clock drift is measured over them (a log cut short, or "
