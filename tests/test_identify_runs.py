@@ -52,6 +52,57 @@ def test_experiments_played_one_after_another_on_one_rig():
     assert np.allclose(res.start_counts, within, atol=0.15), (res.start_counts, within)
 
 
+def _rest_seen(counts, rates, span_counts: int, telemetry_hz: float = 50.0) -> bool:
+    """Whether identify's rest watch, reading telemetry at its polling rate, calls these 1 kHz rows still."""
+    from rodctl.ident.run import RestWatch
+
+    watch, step = RestWatch(span_counts), int(round(1000 / telemetry_hz))
+    return any(watch.still(k / 1000, rates[k], counts[k]) for k in range(0, len(counts), step))
+
+
+def test_a_rod_swaying_inside_the_play_in_front_of_an_output_encoder_is_at_rest():
+    """An encoder on the output shaft (a simulated rig) sees the rod sway inside the gap after the settle
+    move, where the motor's dry friction does not reach it: 3 counts for 16 s with 3 deg of play. Each toggle
+    of the count is a rate spike, so identify used to stop after prbs ("did not come to rest within 20 s"). The
+    count stays within the play's width, which is what rest means behind the play; a motor encoder's rig
+    is still within one count."""
+    from rodctl.ident.run import REST_RATE_RAD_S, rest_span_counts
+    from rodctl.sim.plant import run_closed_loop
+
+    for location, span in (("output", 10), ("motor", 1)):
+        rig = load_params().with_overrides("gearbox.backlash_deg=3.0", f'encoder.location="{location}"')
+        assert rest_span_counts(rig) == span  # 3 deg is 8.2 counts of 0.368 deg, and one count's toggle
+        plant, board = faithful_plant(rig, input_mode="duty"), sil()
+        E.run_sil_sequence([E.EXPERIMENTS[n] for n in ("release", "chirp", "prbs")], board, plant, rig, rest=0.0)
+        E.run_sil(E.settle_move(rig), board, plant)
+        log = run_closed_loop(plant, board, 4000, reset=False)  # the 2 s settle, then the rest watch's first 2 s
+        counts, rates = log["count"][2000:], log["est"][2000:, -1]
+        if location == "output":
+            assert np.abs(rates).max() > REST_RATE_RAD_S and np.ptp(counts) > 1  # the sway the rate rule saw
+            assert not _rest_seen(counts, rates, 1)
+        assert np.ptp(counts) <= span and _rest_seen(counts, rates, span)
+
+
+def test_the_rest_watch_wants_the_whole_hold_and_no_more_than_its_span():
+    """Half a second still, by the rate or by the count; a base that creeps 2 counts in that time is not still behind a
+    motor encoder, and a count that toggles at its edge is."""
+    from rodctl.ident.run import REST_HOLD_S, RestWatch
+
+    t = np.arange(0, 1.0, 0.02)
+    toggling = [0 if k % 7 else 1 for k in range(len(t))]
+    creeping = [int(k * 4 / len(t) + 0.5) for k in range(len(t))]  # 4 counts a second
+    spikes = [0.8 if k % 7 == 0 else 0.0 for k in range(len(t))]
+
+    def first_still(counts, rates, span=1):
+        w = RestWatch(span)
+        return next((tk for tk, c, r in zip(t, counts, rates) if w.still(tk, r, c)), None)
+
+    assert first_still(toggling, spikes) == pytest.approx(REST_HOLD_S, abs=0.021)
+    assert first_still(creeping, spikes) is None
+    assert first_still(creeping, spikes, span=3) == pytest.approx(REST_HOLD_S, abs=0.021)
+    assert first_still(creeping, [0.01] * len(t)) == pytest.approx(REST_HOLD_S, abs=0.021)  # slow by the rate
+
+
 def test_identify_over_sim_with_a_hidden_plant(tmp_path):
     hidden = tmp_path / "hidden.toml"
     hidden.write_text(hidden_params("B").to_toml())

@@ -18,7 +18,11 @@ from typing import Callable
 from rodgains.errors import UserError
 
 REST_RATE_RAD_S = 0.05  # the rod counts as at rest below this base rate ...
-REST_HOLD_S = 0.5  # ... for this long
+REST_HOLD_S = 0.5  # ... for this long, or while the count stays within rest_span_counts that long:
+# a count that toggles at its edge is a rate spike of about 1 rad/s from the board's rate filter. An
+# encoder on the rod's side of the play (encoder.location = "output", simulated) sees the rod sway inside
+# the gap, where the motor's dry friction does not reach it: on the default rod with 2 to 3 deg of play,
+# 1 to 3 counts after the settle move, for 16 s and more. A motor encoder never sees that sway.
 REST_TIMEOUT_S = 20.0
 # After the settle move (experiments.settle_move) the rod is near rest; this wait lets what is left
 # of its sway die out before the next record starts (docs/identification.md).
@@ -35,9 +39,21 @@ RETRY_SCALE = 0.7
 MAX_TRIES = 3
 
 
-def _wait_rest(session, say: Callable[[str], None], settle: float = 0.0, log_dir: Path | None = None) -> None:
+def rest_span_counts(params) -> int:
+    """How far the count may range and the base still be at rest [counts]: one count's toggle, and with
+    an encoder on the output shaft the play's width (the rod's sway inside the gap, which the fit's start
+    treats as rest as it does behind a motor encoder)."""
+    span = 1
+    if params["encoder"].get("location", "motor") == "output":
+        span += int(math.ceil(math.radians(float(params["gearbox"]["backlash_deg"])) / params.rad_per_count))
+    return span
+
+
+def _wait_rest(session, say: Callable[[str], None], settle: float = 0.0, log_dir: Path | None = None,
+               span_counts: int = 1) -> None:
     """`settle` seconds, then until the base holds still (the fit starts every record at rest); a
-    FAULT is reported. log_dir: where the logs so far are, for the message when the rod does not rest."""
+    FAULT is reported. log_dir: where the logs so far are, for the message when the rod does not rest;
+    span_counts: rest_span_counts."""
     from rodctl.link import protocol as P
     from rodctl.link.session import fault_text
 
@@ -47,24 +63,47 @@ def _wait_rest(session, say: Callable[[str], None], settle: float = 0.0, log_dir
         while time.monotonic() < end:
             session.check()
             time.sleep(0.05)
-    still_since, deadline, t = None, time.monotonic() + REST_TIMEOUT_S, None
+    watch, deadline, t = RestWatch(span_counts), time.monotonic() + REST_TIMEOUT_S, None
     while time.monotonic() < deadline:
         session.check()
         t = session.wait_telemetry(timeout=1.0)
         if t.mode == P.Mode.FAULT:
             raise UserError(fault_text(t.reason))
-        if abs(t.base_rate) < REST_RATE_RAD_S:
-            still_since = still_since or time.monotonic()
-            if time.monotonic() - still_since >= REST_HOLD_S:
-                return
-        else:
-            still_since = None
+        if watch.still(time.monotonic(), t.base_rate, t.encoder_count):
+            return
         time.sleep(0.02)
-    rate = f"|base rate| {abs(t.base_rate):.2f} rad/s at the end; " if t is not None else ""
+    rate = (f"|base rate| {abs(t.base_rate):.2f} rad/s, the count over {watch.span()} steps at the end; "
+            if t is not None else "")
     kept = (f"; the logs so far are in {log_dir} (rodctl identify LOG ... fits them)" if log_dir is not None
             and any(log_dir.glob("identify-*.csv")) else "")
     raise UserError(f"the rod did not come to rest within {REST_TIMEOUT_S:g} s ({rate}at rest: under "
-                    f"{REST_RATE_RAD_S} rad/s): is it free to hang still? The motor is off{kept}")
+                    f"{REST_RATE_RAD_S} rad/s or within {span_counts} count{'s' if span_counts > 1 else ''} for {REST_HOLD_S:g} s): "
+                    f"is it free to hang still? The motor is off{kept}")
+
+
+class RestWatch:
+    """Whether the base has held still for REST_HOLD_S [s]: its rate under REST_RATE_RAD_S the whole
+    time, or its count within span_counts [counts] the whole time."""
+
+    def __init__(self, span_counts: int = 1):
+        self.span_counts = int(span_counts)
+        self._seen: list[tuple[float, int]] = []  # (time [s], count) over the last REST_HOLD_S
+        self._slow_since: float | None = None
+
+    def still(self, now: float, rate: float, count: int) -> bool:
+        """now [s], rate [rad/s], count [counts]: True once the base has held still long enough."""
+        self._slow_since = (self._slow_since or now) if abs(rate) < REST_RATE_RAD_S else None
+        self._seen.append((now, int(count)))
+        while len(self._seen) > 1 and now - self._seen[1][0] >= REST_HOLD_S:
+            self._seen.pop(0)  # keep the oldest sample at least REST_HOLD_S back
+        covered = now - self._seen[0][0] >= REST_HOLD_S
+        slow = self._slow_since is not None and now - self._slow_since >= REST_HOLD_S
+        return slow or (covered and self.span() <= self.span_counts)
+
+    def span(self) -> int:
+        """The count's range over the window [counts]."""
+        counts = [c for _, c in self._seen]
+        return max(counts) - min(counts) if counts else 0
 
 
 class SwingWatch:
@@ -160,7 +199,7 @@ def run_experiment(session, exp, log_path: Path | None, params, params_source: s
 
 
 def _settle(session, settle, limits, source: str, log_dir: Path, *, soft_limit: float, settle_s: float,
-            say: Callable[[str], None]) -> None:
+            span_counts: int, say: Callable[[str], None]) -> None:
     """Play the settle move (not logged; `limits`: the parameters whose safety limits the watch uses), then
     wait settle_s seconds and for a still base."""
     from rodctl.link import protocol as P
@@ -174,7 +213,7 @@ def _settle(session, settle, limits, source: str, log_dir: Path, *, soft_limit: 
     if watch.over:
         raise UserError(f"settle move: {watch.over}; motor stopped: is the rod free to swing, and hanging? "
                         f"The logs so far are in {log_dir}")
-    _wait_rest(session, say, settle_s, log_dir)
+    _wait_rest(session, say, settle_s, log_dir, span_counts)
 
 
 def prepare(session, params):
@@ -212,10 +251,11 @@ def run_experiments(session, exps, log_dir: Path, stamp: str, params, source: st
             # the first record starts from the rod the user hung still; every later one from where
             # the last experiment left the rig, which the settle move brings back to rest
             first = i == 1 and attempt == 1
-            _wait_rest(session, say, log_dir=log_dir)  # a stopped experiment leaves the rod swinging: the settle move starts from rest
+            _wait_rest(session, say, log_dir=log_dir, span_counts=rest_span_counts(params))  # a stopped experiment leaves the rod swinging: the settle move starts from rest
             confirm(f"[{i}/{len(exps)}] {exp.describe()}" + ("" if first else f"\n  before it, {settle.describe()}"))
             if not first:
-                _settle(session, settle, limits, source, log_dir, soft_limit=soft_limit, settle_s=settle_s, say=say)
+                _settle(session, settle, limits, source, log_dir, soft_limit=soft_limit, settle_s=settle_s,
+                        span_counts=rest_span_counts(params), say=say)
             path = log_dir / f"identify-{stamp}-{exp.name}{'' if attempt == 1 else f'-{attempt}'}.csv"
             watch = SwingWatch(limits, soft_limit)
             path, last = run_experiment(session, exp, path, params, source, watch)
