@@ -398,10 +398,11 @@ def test_tune_refuses_a_starting_design_it_cannot_make(tmp_path, capsys):
 
 def test_tune_says_plainly_when_no_trial_met_the_nominal_goals(tmp_path, capsys):
     """0.5 s runs cannot settle by 1.5 s: every trial misses the goals, so none is scored. The file holds
-    the starting values and says so; the output says so too, with --no-goals as the way to score."""
+    the starting values and says so; the output says so too, with --no-goals as the way to score. Exit 1: a
+    script that tunes and then flashes must not take the starting values for a tuned design (it exited 0)."""
     out = tmp_path / "t.toml"
     assert main(["tune", "--cases", "nominal", "--samples", "0", "--seconds", "0.5", "--only", "lqr.q_angle",
-                 "--budget", "2", "--jobs", "1", "--out", str(out)]) == 0
+                 "--budget", "2", "--jobs", "1", "--out", str(out)]) == 1
     text = capsys.readouterr().out
     assert "no trial met the nominal goals in 2 trials" in text and "none was scored" in text, text
     assert "--no-goals" in text and "starting values unchanged" in text

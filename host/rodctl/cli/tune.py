@@ -101,7 +101,7 @@ def run_tune(args) -> int:
         print(T.unscored_text(summary))
         print(f"wrote {args.out} with the starting values unchanged  ({summary['trials']} trials, {wall:.0f} s in "
               f"this session); to score the trials without the nominal goals: --no-goals")
-        return 0
+        return 1  # a file that holds the start unchanged is no tuned design: a script must not take it for one
     print(f"start  (trial #{summary['start_number']}): score {s.get('score', 0):.4f} ({s.get('passed', 0)}/"
           f"{s.get('runs', 0)}), margin {s.get('margin', 0):.4f}")
     print(f"tuned  (trial #{summary['best_number']}): score {b.get('score', 0):.4f} ({b.get('passed', 0)}/"
@@ -119,7 +119,9 @@ def register(sub) -> None:
                                    "maximize the robustness score (rodctl robustness). The first trial is the "
                                    "parameter file itself. --study DIR keeps every finished trial (Ctrl-C is safe) "
                                    "and resumes. Writes a complete parameter file whose comments say what was tuned, "
-                                   "the score and the command that reproduces it.")
+                                   "the score and the command that reproduces it. Exit 0: tuned; 1: NOT TUNED (no trial met "
+                                   "the nominal goals: --out holds the starting values, unchanged); 2: bad input; "
+                                   "3: the starting design is refused; 130: Ctrl-C.")
     add_param_args(t)
     add_score_args(t)
     add_exec_args(t)
