@@ -531,7 +531,7 @@ def test_a_clip_too_short_to_place_in_the_log_is_refused_not_fitted_a_swing_away
     out = tmp_path / "t.parquet"
     r = run_rodctl("track", str(video), "--log", str(d["log"]), "--out", str(out), "--quiet", timeout=300)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
-    assert "only loosely" in r.stderr and "a clip of 1.0 s is too short" in r.stderr
+    assert "only loosely" in r.stderr and "markers span 1.0 s, too short to place" in r.stderr
     assert not out.exists() and not out.with_suffix(".mcap").exists()
 
 

@@ -187,7 +187,8 @@ def align(tau: np.ndarray, beta: np.ndarray, t_log: np.ndarray, th_log: np.ndarr
     res = float(np.sqrt(np.mean((beta[inside] - model) ** 2)))
     max_residual_deg = MAX_RESIDUAL_DEG + 0.5 * play_deg
     if res > np.radians(max_residual_deg):
-        why = (f"a clip of {np.ptp(tau):.1f} s is too short to place in the log (film 6 s or more of swinging)"
+        why = (f"the frames that show the rod's markers span {np.ptp(tau):.1f} s, too short to place in the log "
+               "(film 6 s or more of swinging)"
                if np.ptp(tau) < GUIDE_CLIP_S else "frames left out of the video")
         raise InputError(f"the video's base angle follows the log's only loosely at the best fit ({np.degrees(res):.1f} "
                          f"deg RMS, more than {max_residual_deg:g}; camera minus encoder {np.degrees(c):+.1f} deg): {why}, "
