@@ -15,9 +15,11 @@ from rodctl.cli.common import (ARM_CHOICES, RateMeter, add_design_args, add_port
 from rodctl.cli.status import status_report
 from rodctl.link import protocol as P
 from rodctl.link.design import apply_settings
-from rodctl.link.session import SETTINGS, Session, is_tty, name_of
+from rodctl.link.session import CLEAR_FAULT, SETTINGS, Session, is_tty, name_of
 from rodctl.logs.schema import from_upright_deg
 
+
+CLEAR = "type `clear`"  # the console's words for CLEAR_FAULT
 
 CONSOLE_HELP = """commands:
   arm swing-up | arm balance   arm the controller (disarmed again when the console closes)
@@ -111,7 +113,7 @@ def run_console(args) -> int:
                         r = status_report(s, args)
                         th = ", ".join(f"{from_upright_deg(x):+.1f}" for x in r["theta_hat_rad"])
                         st = ", ".join(f"{k} {SETTINGS[k].format(v)}" for k, v in r["settings"].items())
-                        print(f"mode {mode_text(P.Mode[r['mode']], P.Reason[r['reason']])}; theta_hat [{th}] deg from upright; "
+                        print(f"mode {mode_text(P.Mode[r['mode']], P.Reason[r['reason']], CLEAR)}; theta_hat [{th}] deg from upright; "
                               f"torque {r['torque_Nm']:.3g} N m; duty {r['duty']:.3g}")
                         print(f"settings: {st}")
                         print(f"firmware {r['firmware_version']}, N={r['n']}, {r['rate_hz']:g} Hz, parameters "
@@ -119,7 +121,7 @@ def run_console(args) -> int:
                     else:
                         raise UserError(f"unknown command {cmd!r}; 'help' lists them")
                 except UserError as e:
-                    msg = str(e).replace("run `rodctl clear-fault`", "type `clear`")
+                    msg = str(e).replace(CLEAR_FAULT, CLEAR)
                     print(f"error: {msg}")
                     if not s.alive:
                         raise UserError(str(e)) from None

@@ -7,7 +7,7 @@ import json
 from rodctl.cli.common import add_design_args, add_port_arg, session_for, stop_signals
 from rodctl.link import protocol as P
 from rodctl.link.design import apply_settings, design_params
-from rodctl.link.session import (HELD_UNTIL_RESET, SETTINGS, Session, fault_text, hello_settings, name_of,
+from rodctl.link.session import (SETTINGS, Session, fault_text, hello_settings, mode_text, name_of,
                                  parse_assignment, reason_text, rig_source)
 from rodctl.logs.schema import from_upright_deg
 
@@ -51,9 +51,7 @@ def run_status(args) -> int:
         print(json.dumps(r, indent=1))
         return 0
     st = r["settings"]
-    mode = r["mode"] + (f" ({reason_text(P.Reason[r['reason']])})" if r["reason"] != "NONE" else "")
-    if r["mode"] == "FAULT" and P.Reason[r["reason"]] not in HELD_UNTIL_RESET:  # those say what leaves them
-        mode += ": run `rodctl clear-fault`"
+    mode = mode_text(P.Mode[r["mode"]], P.Reason[r["reason"]])
     print(f"port        {r['port']}")
     print(f"firmware    {r['firmware_version']} (gains schema {r['gains_schema']}), protocol v{r['protocol_version']}")
     print(f"gains       N={r['n']} at {r['rate_hz']:g} Hz, header sha256 {r['header_sha256'][:16]}..., "

@@ -82,20 +82,22 @@ def reason_text(reason) -> str:
         return f"reason {int(reason)}"
 
 
+CLEAR_FAULT = "run `rodctl clear-fault`"  # what leaves a FAULT, said the same way wherever a FAULT is shown
+
+
 def fault_text(reason) -> str:
     """The board is in FAULT for `reason`: why, and what leaves it (clear-fault, or for the board's own faults
     the restart their words name)."""
-    if int(reason) in HELD_UNTIL_RESET:
-        return f"device is in FAULT ({reason_text(reason)})"
-    return f"device is in FAULT ({reason_text(reason)}): run `rodctl clear-fault`"
+    return f"device is in {mode_text(P.Mode.FAULT, reason)}"
 
 
-def mode_text(mode, reason) -> str:
+def mode_text(mode, reason, clear: str = CLEAR_FAULT) -> str:
+    """The mode in words; a FAULT with its reason and what leaves it (`clear`: how this tool says clear-fault)."""
     m = name_of(P.Mode, mode)
     if int(mode) == P.Mode.FAULT:
         if int(reason) in HELD_UNTIL_RESET:  # clear-fault cannot leave these: the text says what does
             return f"{m} ({reason_text(reason)})"
-        return f"{m} ({reason_text(reason)}: run clear-fault)"
+        return f"{m} ({reason_text(reason)}): {clear}"
     if int(reason) != P.Reason.NONE:
         return f"{m} (last: {reason_text(reason)})"
     return m

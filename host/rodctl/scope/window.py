@@ -273,7 +273,7 @@ class Scope:
             x, y = shape_nodes(th[-1], self.l)
             self.rod.set_data(x, y)
             tlm = self.s.telemetry
-            mode = mode_text(tlm.mode, tlm.reason) if tlm is not None else "?"
+            mode = mode_text(tlm.mode, tlm.reason, "press c") if tlm is not None else "?"
             rec = f"  REC {self.writer.path} ({self.writer.rows} frames)" if self.writer else ""
             self.status.set_text(f"mode {mode} | theta1 {dev[-1, 0]:+7.1f} deg from upright, tip "
                                  f"{dev[-1, -1]:+7.1f} deg | {self.fps:5.0f} frames/s{rec}")
