@@ -119,6 +119,26 @@ def test_watchdog_is_refreshed_at_its_pace(harness):
     assert min(gaps) >= 10 and max(gaps) <= 20  # far inside the 250 ms timeout
 
 
+def test_serial_reads_never_wait(harness):
+    """Stream's 1 s timeout would let readBytes spin past the 250 ms watchdog when the host re-enumerates
+    between available() and it (teensy3/usb_dev.c frees the queued packets): setup() sets it to 0."""
+    _, _, out = run_board(harness, seconds=0.1)
+    assert out["serial_timeout_ms"] == "0"
+
+
+@pytest.mark.parametrize("vector", ["nmi", "svcall", "debugmonitor", "hard"])
+def test_an_exception_the_firmware_does_not_expect_turns_the_driver_off(harness, vector):
+    """Swinging up (nEN low, PWM running), an NMI or a stray SVCall / DebugMonitor lands in the core's
+    unused_isr, which spins with the pins as they were until the watchdog resets the chip (250 ms of drive):
+    the board's handlers turn the driver off first, as its fault handlers do."""
+    host = P.encode(P.Arm(P.ArmMode.SWING_UP), 1)
+    r = subprocess.run([str(harness), "0.4", "1", "-1,0", host.hex(), "0.2", "82,0", vector],
+                       capture_output=True, text=True, timeout=60)
+    out = dict(ln.split("=", 1) for ln in r.stdout.splitlines() if "=" in ln and not ln.startswith("serial "))
+    assert out["nen_low_before"] == "1"  # the driver was on when the exception came
+    assert out["handler_driver_off"] == "1", r.stdout
+
+
 def test_an_upload_request_turns_the_driver_off_on_the_next_step(harness):
     """Swinging up, the host sets the port to 134 baud (an upload asks for the bootloader; 15 ms later the
     CPU halts where it stands, PWM and nEN held): nEN goes high within one control period and stays high,

@@ -24,7 +24,7 @@ void digitalWriteFast(uint8_t pin, uint8_t val);
 uint8_t digitalReadFast(uint8_t pin);
 void pinMode(uint8_t pin, uint8_t mode);
 void analogWrite(uint8_t pin, int val);
-void analogWriteResolution(uint32_t bits);
+uint32_t analogWriteResolution(uint32_t bits);
 void analogWriteFrequency(uint8_t pin, float frequency);
 void attachInterrupt(uint8_t pin, void (*function)(void), int mode);
 uint32_t micros(void);
@@ -37,7 +37,7 @@ extern volatile uint32_t stub_reg32[1024];
 extern volatile uint16_t stub_reg16[64];
 #define STUB_REG32(a) (stub_reg32[((a) >> 2) & 1023u])
 #define STUB_REG16(a) (stub_reg16[((a) >> 1) & 63u])
-#define IRQ_PORTD 61
+#define IRQ_PORTD 62  /* kinetis.h, MK64FX512 */
 #define NVIC_SET_PRIORITY(irq, prio) (STUB_REG32(0xE000E400u + (irq)) = (uint8_t)(prio))
 #define ARM_DEMCR STUB_REG32(0xE000EDFCu)
 #define ARM_DEMCR_TRCENA (1u << 24)
@@ -118,6 +118,7 @@ class usb_serial_class {
     void begin(long);
     int available();
     size_t readBytes(char *buffer, size_t length);
+    void setTimeout(unsigned long timeout_ms);  // Stream's
     int availableForWrite();
     size_t write(const uint8_t *buffer, size_t size);
     uint32_t baud(void);  // the line coding's rate the host set (usb_cdc_line_coding[0]): 134 asks for a reboot

@@ -9,7 +9,9 @@
 // Prints `serial HEX` (every byte the board wrote), then key=value lines.
 #include <stdio.h>
 #include <stdlib.h>
+#include <signal.h>
 #include <string.h>
+#include <unistd.h>
 
 #include <vector>
 
@@ -33,6 +35,7 @@ static std::vector<uint8_t> out_bytes, host_bytes;
 static size_t host_pos;
 static std::vector<uint64_t> refresh_ms;
 static uint32_t line_baud = 9600;
+static long serial_timeout_ms = 1000;  // Stream's default (teensy3/Stream.h)
 static uint64_t nen_low_last_us;  // the last time nEN was seen low
 static uint16_t last_refresh_value;
 
@@ -58,7 +61,7 @@ void digitalWriteFast(uint8_t pin, uint8_t val)
 uint8_t digitalReadFast(uint8_t pin) { return pin == 8 ? HIGH : pins[pin]; }  // nFAULT: no fault
 void pinMode(uint8_t, uint8_t) {}
 void analogWrite(uint8_t, int) {}
-void analogWriteResolution(uint32_t) {}
+uint32_t analogWriteResolution(uint32_t) { return 0; }
 void analogWriteFrequency(uint8_t, float) {}
 void attachInterrupt(uint8_t, void (*)(void), int) {}
 uint32_t micros(void) { return (uint32_t)now_us; }
@@ -84,6 +87,7 @@ bool IntervalTimer::begin(void (*isr)(), unsigned int)
 void IntervalTimer::priority(uint8_t) {}
 
 void usb_serial_class::begin(long) {}
+void usb_serial_class::setTimeout(unsigned long timeout_ms) { serial_timeout_ms = (long)timeout_ms; }
 int usb_serial_class::available() { return (int)(host_bytes.size() - host_pos); }
 size_t usb_serial_class::readBytes(char *buffer, size_t length)
 {
@@ -110,6 +114,22 @@ size_t usb_serial_class::write(const uint8_t *buffer, size_t size)
 void setup();
 void loop();
 extern "C" void startup_early_hook(void);
+extern "C" void nmi_isr(void);
+extern "C" void svcall_isr(void);
+extern "C" void debugmonitor_isr(void);
+extern "C" void hard_fault_isr(void);
+
+// A fault handler never returns: the alarm reports where the driver's pins stand while it spins.
+static void report_spinning_handler(int)
+{
+    bool off = (CORE_PIN7_PORTSET & CORE_PIN7_BITMASK) && (CORE_PIN7_DDRREG & CORE_PIN7_BITMASK)
+               && CORE_PIN7_CONFIG == PORT_PCR_MUX(1) && (CORE_PIN5_PORTCLEAR & CORE_PIN5_BITMASK)
+               && CORE_PIN5_CONFIG == PORT_PCR_MUX(1);
+    char line[64];
+    int n = snprintf(line, sizeof line, "handler_driver_off=%d\n", off ? 1 : 0);
+    (void)!write(1, line, (size_t)n);
+    _exit(0);
+}
 static bool early_driver_off;
 static unsigned early_wdog;
 
@@ -128,6 +148,7 @@ int main(int argc, char **argv)
         }
     }
     double upload_at_s = argc > 5 ? atof(argv[5]) : -1.0;
+    const char *vector = argc > 7 ? argv[7] : "-";  // an exception to raise at upload_at_s instead
     unsigned srs0 = 0x82, srs1 = 0;  // POR and LVD: a power-on
     if (argc > 6) {
         sscanf(argv[6], "%x,%x", &srs0, &srs1);
@@ -149,6 +170,16 @@ int main(int argc, char **argv)
     while (now_us < end) {
         now_us += 50u;
         if (now_us >= upload_us) {
+            void (*isr)(void) = !strcmp(vector, "nmi") ? nmi_isr : !strcmp(vector, "svcall") ? svcall_isr
+                                : !strcmp(vector, "debugmonitor") ? debugmonitor_isr : !strcmp(vector, "hard") ? hard_fault_isr
+                                : nullptr;
+            if (isr != nullptr) {
+                printf("nen_low_before=%d\n", pins[7] == LOW ? 1 : 0);
+                fflush(stdout);
+                signal(SIGALRM, report_spinning_handler);
+                alarm(1);
+                isr();
+            }
             line_baud = 134;
         }
         if (timer_isr != nullptr && now_us >= next_isr) {
@@ -166,9 +197,10 @@ int main(int argc, char **argv)
         printf("%02x", b);
     }
     printf("\nnen_low_ever=%d\nled_toggles=%u\nwdog_presc=%u\nwdog_stctrlh=%u\nearly_driver_off=%d\n"
-           "early_wdog_stctrlh=%u\nnen_low_last_ms=%.3f\nupload_ms=%.3f\nwdog_timeout_ms=%u\nrefresh_ms=", nen_low_ever ? 1 : 0, led_toggles, (unsigned)WDOG_PRESC,
+           "early_wdog_stctrlh=%u\nnen_low_last_ms=%.3f\nupload_ms=%.3f\nwdog_timeout_ms=%u\nserial_timeout_ms=%ld\nrefresh_ms=", nen_low_ever ? 1 : 0, led_toggles, (unsigned)WDOG_PRESC,
            (unsigned)WDOG_STCTRLH, early_driver_off ? 1 : 0, early_wdog, nen_low_last_us / 1e3,
-           upload_us == UINT64_MAX ? -1.0 : upload_us / 1e3, ((unsigned)WDOG_TOVALH << 16) | WDOG_TOVALL);
+           upload_us == UINT64_MAX ? -1.0 : upload_us / 1e3, ((unsigned)WDOG_TOVALH << 16) | WDOG_TOVALL,
+           serial_timeout_ms);
     for (size_t i = 0; i < refresh_ms.size(); i++) {
         printf(i ? ",%llu" : "%llu", (unsigned long long)refresh_ms[i]);
     }

@@ -5,7 +5,8 @@
 // startup_early_hook() first, before it clocks the GPIO ports and before .data and .bss exist, so the hook
 // touches registers only; the core's default hook writes WDOG_STCTRLH = WDOG_STCTRLH_ALLOWUPDATE, which
 // this one keeps (board_watchdog.cpp reconfigures it later). hard_fault_isr and the other fault vectors are
-// weak aliases of fault_isr, which spins with every pin as it was: nEN possibly low and the PWM running
+// weak aliases of fault_isr (nmi_isr, svcall_isr and debugmonitor_isr of unused_isr, which calls it), which spins
+// with every pin as it was: nEN possibly low and the PWM running
 // until the watchdog resets the chip. The 10 k pull-up on nEN (docs/wiring.md) covers the reset itself.
 #include "board_framework.h"
 #include "board_pins.h"
@@ -54,6 +55,23 @@ extern "C" void bus_fault_isr(void)
 }
 
 extern "C" void usage_fault_isr(void)
+{
+    driver_off_and_wait();
+}
+
+// The core's weak aliases of unused_isr, which spins in fault_isr with the pins as they were. Not
+// pendablesrvreq_isr: EventResponder.cpp defines it, and a second definition would not link.
+extern "C" void nmi_isr(void)
+{
+    driver_off_and_wait();
+}
+
+extern "C" void svcall_isr(void)
+{
+    driver_off_and_wait();
+}
+
+extern "C" void debugmonitor_isr(void)
 {
     driver_off_and_wait();
 }

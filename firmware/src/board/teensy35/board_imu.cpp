@@ -106,7 +106,11 @@ bool board_imu_begin(void)
 
 void board_imu_take(rod_imu_reading_t *out)
 {
+    // no sample is zeros, not the stack's leftovers: the reading goes out in the IMU telemetry frame as it is
     out->fresh = false;
+    out->accel_x = 0.0f;
+    out->accel_y = 0.0f;
+    out->gyro = 0.0f;
     if (!alive || !done) {
         return;  // a part given up at boot stays silent, even if its first transfer ends late
     }

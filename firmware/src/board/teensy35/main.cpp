@@ -131,7 +131,7 @@ static void service_rx()
             return;
         }
         size_t want = (size_t)avail < sizeof rx_buf ? (size_t)avail : sizeof rx_buf;
-        rx_len = Serial.readBytes((char *)rx_buf, want);  // want <= available: returns at once
+        rx_len = Serial.readBytes((char *)rx_buf, want);  // want <= available, timeout 0: returns at once
         rx_used = 0;
     }
     rx_used += rod_device_rx(&device, rx_buf + rx_used, rx_len - rx_used);
@@ -275,11 +275,14 @@ void setup()
 
     board_quadrature_begin();
     (void)board_imu_begin();  // a missing part leaves every sample "none": the core trips IMU if armed
-    // May block for up to about 2 s on some Teensyduino cores (1.62 waits for a host to open the
-    // port; other versions return at once). Nothing depends on it: the driver is already off
-    // (nEN high above), the control timer and watchdog start after it, and every USB call in
-    // loop() copes with no host without waiting for one (frames are dropped and counted).
+    // Waits up to 2 s for a host to open the port once enumerated (750 ms if not; teensy3/usb_serial.h since
+    // 2021). Nothing depends on it: the driver is already off (nEN high above), the control timer and
+    // watchdog start after it, and every USB call in loop() copes with no host without waiting for one
+    // (frames are dropped and counted).
     Serial.begin(115200);  // USB: the baud rate is ignored
+    // Stream's timeout is 1 s: readBytes would spin that long if the host re-enumerates between available()
+    // and it (usb_dev.c frees the queued packets), and the 250 ms watchdog would reset the board into FAULT.
+    Serial.setTimeout(0);
     rod_device_init(&device);
     {
         uint8_t stored[ROD_RIG_STORE_SIZE];
