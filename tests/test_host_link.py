@@ -317,6 +317,23 @@ def test_arm_command_stays_attached_then_disarms(capsys):
     assert "disarmed" in err.splitlines()[-1]
 
 
+@pytest.mark.parametrize("command", [["arm", "--swing-up"], ["log", "--arm", "swing-up"]])
+def test_a_run_the_board_trips_ends_there_with_exit_1_and_says_so(command, tmp_path, capsys):
+    """A reversed motor trips RUNAWAY within 0.1 s of arming: the command ends there, not at its --duration, exit 1
+    (it exited 0 saying "disarmed", and logged 2 s of FAULT). The log keeps the run and its trailer says FAULT."""
+    from rodctl.logs import read_log
+
+    out = tmp_path / "run.csv"
+    assert cli.main([*command, "--port", "sim://?motor_sign=-1", "--duration", "5", "--out", str(out)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-2].endswith("; the board is in FAULT, its driver off") and "disarmed" not in err[-2]
+    assert err[-1].startswith("rodctl: the board tripped ") and "FAULT (runaway" in err[-1]
+    assert err[-1].endswith(f"{out} keeps the run up to the trip")
+    log = read_log(out)
+    assert log.meta["end"] == "FAULT"
+    assert log.data["time_s"][-1] - log.data["time_s"][0] < 1.0  # ended at the trip, not after 5 s
+
+
 def test_disarm_and_clear_fault_commands(capsys):
     assert cli.main(["disarm", "--port", "sim://"]) == 0
     assert capsys.readouterr().out.strip() == "disarmed: mode DISARMED"

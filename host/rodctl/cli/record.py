@@ -10,7 +10,7 @@ from rodctl.cli.common import (ARM_CHOICES, RateMeter, StatusLine, add_design_ar
                                ctrl_c_watch, no_interrupts, session_for, status_text, stop_signals)
 from rodctl.link import protocol as P
 from rodctl.link.attach import Attached, attach
-from rodctl.link.session import Session, name_of
+from rodctl.link.session import Session, fault_text, name_of
 from rodctl.logs.writer import default_log_name
 
 
@@ -73,6 +73,9 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
               file=sys.stderr, flush=True)
     if a.error is not None:
         raise a.error
+    if a.fault is not None:  # the run the board was armed for ended there: a failure on its own terms
+        raise UserError(f"the board tripped {a.fault_after_s:.1f} s after arming: {fault_text(a.fault.reason)}; "
+                        "the driver is off" + (f"; {writer.path} keeps the run up to the trip" if writer else ""))
     if a.interrupted and session.hello is None:  # nothing armed or written yet
         print("rodctl: interrupted before the board answered; nothing was armed or written", file=sys.stderr,
               flush=True)
@@ -81,6 +84,9 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
 
 
 def _disarm_note(session: Session) -> str:
+    t = session.telemetry
+    if t is not None and t.mode == P.Mode.FAULT:  # a DISARM leaves FAULT as it is: the driver is off either way
+        return "; the board is in FAULT, its driver off"
     if session.disarm_acked:
         return "; disarmed"
     if session.disconnected is not None:

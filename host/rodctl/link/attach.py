@@ -3,7 +3,7 @@ wait until Ctrl-C, a duration or an error; then disarm, close the log with the l
 
     a = attach(session, args, out="run.csv", fmt="csv", arm_mode=P.ArmMode.BALANCE, duration_s=10.0,
                started=say_start, armed=say_armed, tick=show_status, stopping=end_status)
-    a.ended, a.counters, a.writer     # "end" | "duration" | "Ctrl-C" | "SIGTERM" | "SIGHUP" | "error"; the
+    a.ended, a.counters, a.writer     # "end" | "duration" | "FAULT" | "Ctrl-C" | "SIGTERM" | "SIGHUP" | "error"; the
                                       # link's counters; the log
     if a.error is not None:           # kept, not raised: the caller says what was written first
         raise a.error
@@ -61,11 +61,14 @@ class Attached:
     ended: str = "end"
     counters: dict[str, int] = field(default_factory=dict)
     error: BaseException | None = None
+    fault: object | None = None  # the first FAULT telemetry of an armed run (it ends the attach: ended "FAULT")
+    fault_after_s: float = 0.0  # how long after the ARM's ACK it was seen [s]
 
     @property
     def interrupted(self) -> bool:
-        """Ended by Ctrl-C or a stop signal (`stopped_by`'s names), not by its end, its duration or an error."""
-        return self.ended not in ("end", "duration", "error")
+        """Ended by Ctrl-C or a stop signal (`stopped_by`'s names), not by its end, its duration, a FAULT or an
+        error."""
+        return self.ended not in ("end", "duration", "FAULT", "error")
 
 
 def _nothing(*_args) -> None:
@@ -79,7 +82,8 @@ def attach(session: Session, design_args=None, *, out: str | None = None, fmt: s
            started: Callable[[Attached], None] = _nothing, armed: Callable[[object], None] = _nothing,
            tick: Callable[[Attached], None] = _nothing, stopping: Callable[[], None] = _nothing) -> Attached:
     """Open `session` (not yet open), log every frame to `out` (fmt, overwrite: as LogWriter) from the first one
-    on, arm `arm_mode`, and stay until duration_s [s] has passed (None: until Ctrl-C or an error).
+    on, arm `arm_mode`, and stay until duration_s [s] has passed (None: until Ctrl-C or an error), or, armed,
+    until the board trips a FAULT: an armed run ends there (a.fault), as nothing it was armed for goes on.
 
     design_args: --params/--set, to name the design the board runs (design_params). started(a) is called once
     the session is open and the log begun; armed(ack) with the board's ACK of the ARM; tick(a) every POLL_S
@@ -104,6 +108,7 @@ def attach(session: Session, design_args=None, *, out: str | None = None, fmt: s
             if interrupted():
                 raise KeyboardInterrupt
             armed(session.arm(arm_mode))
+            armed_at, armed_seen = time.monotonic(), session.telemetry_seen
         t_end = None if duration_s is None else time.monotonic() + duration_s
         while t_end is None or time.monotonic() < t_end:
             time.sleep(POLL_S)
@@ -114,6 +119,10 @@ def attach(session: Session, design_args=None, *, out: str | None = None, fmt: s
                 e = session.listener_error
                 raise e if isinstance(e, UserError) else UserError(f"writing {out} failed: {e}")
             tick(a)
+            t = session.telemetry
+            if arm_mode is not None and session.telemetry_seen > armed_seen and t is not None and t.mode == P.Mode.FAULT:
+                a.ended, a.fault, a.fault_after_s = "FAULT", t, time.monotonic() - armed_at
+                break
     except KeyboardInterrupt as e:
         a.ended = stopped_by(e)
     except BaseException as e:  # noqa: BLE001 - the log closed first, then the error
