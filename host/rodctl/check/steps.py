@@ -156,16 +156,20 @@ def encoder(ctx: Context) -> Result:
     counts = ctx.rest["count"].astype(int)
     spread = int(counts.max() - counts.min()) if counts.size else 0
     hang = int(np.median(counts)) if counts.size else 0
-    values = {"rest_spread_counts": spread, "hanging_count": hang, "hanging_deg": ctx.deg(hang)}
+    # a rod that went over the top hangs whole turns from its zero, which the firmware's angle counts: still its zero
+    turns = int(round(hang / ctx.cpr))
+    off = hang - turns * ctx.cpr  # [counts], not whole: a turn is 979.2 counts on the default gearmotor
+    values = {"rest_spread_counts": spread, "hanging_count": hang, "hanging_deg": ctx.deg(hang), "hanging_turns": turns}
     if spread > REST_NOISE_COUNTS:
         return Result("encoder", FAIL, f"the count changes by {spread} with the rod at rest",
                       "electrical noise on A/B (a shielded cable away from the motor leads) or a loose coupling; "
                       "let the rod hang still and run the check again", values)
-    if abs(hang) > ZERO_TOLERANCE_COUNTS:
-        return Result("encoder", FAIL, f"the hanging rod reads {hang} counts ({ctx.deg(hang):+.1f} deg) from zero",
-                      "the board takes its zero at power-on: let the rod hang still, then reset the board "
-                      "(its button, or unplug and replug USB)", values)
-    rest_text = f"still at rest, hanging {hang} counts from zero"
+    round_text = f" after {abs(turns)} whole turn{'s' if abs(turns) != 1 else ''}" if turns else ""
+    if abs(off) > ZERO_TOLERANCE_COUNTS:
+        return Result("encoder", FAIL, f"the hanging rod reads {int(round(off))} counts ({ctx.deg(off):+.1f} deg) from zero"
+                      f"{round_text}", "the board takes its zero at power-on: let the rod hang still, then reset "
+                      "the board (its button, or unplug and replug USB)", values)
+    rest_text = f"still at rest, hanging {int(round(off))} counts from zero{round_text}"
     instruction = "Turn the rod by hand about a quarter turn counter-clockwise (seen from the front) and back"
     ctx.say(f"encoder: {instruction}")
     if not ctx.user.do(instruction, ctx.session):
