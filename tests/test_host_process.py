@@ -39,6 +39,26 @@ def test_sim_device_serves_another_rodctl_over_a_pty():
         assert "mode        DISARMED" in r.stdout
 
 
+def test_arming_with_a_design_the_board_does_not_run_warns_and_logs_the_boards_own(tmp_path):
+    """Tutorial step 5 arms with --params my_rig.toml: when the board was not flashed with it, the run went on with
+    the board's own gains and said nothing (the log named them)."""
+    from rodctl.logs import read_log
+
+    out = tmp_path / "run.csv"
+    with sim_device() as (_, pts):
+        r = run_rodctl("arm", "--balance", "--port", pts, "--duration", "0.3", "--set", "rod.length=0.14",
+                       "--out", str(out))
+        same = run_rodctl("arm", "--balance", "--port", pts, "--duration", "0.3")
+    assert r.returncode == 0, r.stderr
+    warning = [ln for ln in r.stderr.splitlines() if ln.startswith("rodctl: warning:")]
+    assert warning == ["rodctl: warning: the board does not run the design of defaults with --set rod.length=0.14: "
+                       "its header " + read_log(out).meta["header_sha256"][:12] + " is the design of "
+                       "firmware/include/rod_gains.toml, and that design runs (the log names it); to run yours: "
+                       "rodctl flash --set rod.length=0.14"]
+    assert read_log(out).meta["params_source"] == "firmware/include/rod_gains.toml"
+    assert same.returncode == 0 and "warning" not in same.stderr
+
+
 def test_sigkill_of_log_leaves_a_readable_csv_and_a_board_that_disarms_itself(tmp_path):
     out = tmp_path / "killed.csv"
     with sim_device() as (dev, pts):

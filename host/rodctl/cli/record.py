@@ -43,6 +43,8 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
         design = (f"parameters {a.source}" if a.params is not None
                   else f"parameters unknown (header {bytes(h.header_sha256).hex()[:16]})")
         target = f" -> {a.writer.path}" if a.writer else ""
+        if a.mismatch:
+            print(f"rodctl: warning: {a.mismatch}", file=sys.stderr, flush=True)
         print(f"{what}: {a.session.port}{target}  (firmware {h.fw_major}.{h.fw_minor}.{h.fw_patch}, N={h.n}, "
               f"{1e6 / h.period_us:g} Hz, {design}); Ctrl-C stops" + (" and disarms" if arm_mode else ""),
               file=sys.stderr, flush=True)

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Callable, ContextManager
 from rodgains.errors import UserError
 
 from rodctl.link import protocol as P
-from rodctl.link.design import design_params
+from rodctl.link.design import design_mismatch, design_params
 from rodctl.link.session import Session, fault_text
 
 if TYPE_CHECKING:
@@ -61,6 +61,7 @@ class Attached:
     ended: str = "end"
     counters: dict[str, int] = field(default_factory=dict)
     error: BaseException | None = None
+    mismatch: str | None = None  # --params / --set named a design the board does not run (design_mismatch)
     fault: object | None = None  # the first FAULT telemetry of an armed run (it ends the attach: ended "FAULT")
     fault_after_s: float = 0.0  # how long after the ARM's ACK it was seen [s]
 
@@ -96,6 +97,7 @@ def attach(session: Session, design_args=None, *, out: str | None = None, fmt: s
     try:
         session.open()
         a.params, a.source = design_params(session, design_args)
+        a.mismatch = design_mismatch(session, design_args, a.source)
         latest = session.telemetry if session.telemetry is not None else session.hello
         if arm_mode is not None and latest is not None and latest.mode == P.Mode.FAULT:
             # the ARM would be refused: no log of a run that never started, and an old one --force named is kept

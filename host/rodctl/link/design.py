@@ -11,18 +11,42 @@ from typing import Callable
 from rodctl.link.session import Session, parse_assignment
 
 
+def given_design(args) -> str | None:
+    """How the user named a design with --params / --set, or None when they named none."""
+    if args is None or not (getattr(args, "params", None) or getattr(args, "overrides", None)):
+        return None
+    label = args.params or "defaults"
+    if args.overrides:
+        label += " with " + " ".join(f"--set {o}" for o in args.overrides)
+    return label
+
+
+def design_mismatch(session: Session, args, source: str) -> str | None:
+    """A warning when --params / --set named a design the board does not run (design_params found `source`), else
+    None: the run goes on with the board's own design, which a user arming with --params believed was theirs."""
+    given = given_design(args)
+    if given is None or source == given:
+        return None
+    import shlex
+
+    header = bytes(session.hello.header_sha256).hex()[:12]
+    runs = f"is the design of {source}" if source != "unknown" else "matches no parameter file this command knows"
+    flags = ([f"--params {shlex.quote(args.params)}"] if args.params else []) + \
+        [f"--set {shlex.quote(o)}" for o in args.overrides or ()]
+    return (f"the board does not run the design of {given}: its header {header} {runs}, and that design runs "
+            f"(the log names it); to run yours: rodctl flash {' '.join(flags)}")
+
+
 def design_params(session: Session, args=None):
     """(Params, source) the firmware's gains came from, matched by the HELLO's header hash."""
     from rodctl.logs.metadata import identify_params
     from rodctl.paths import shown
 
     cands = []
-    if args is not None and (getattr(args, "params", None) or getattr(args, "overrides", None)):
+    label = given_design(args)
+    if label is not None:
         from rodgains.params import load_params
 
-        label = args.params or "defaults"
-        if args.overrides:
-            label += " with " + " ".join(f"--set {o}" for o in args.overrides)
         cands.append((load_params(args.params, args.overrides), label))
     dev = getattr(session.ser, "device", None)  # sim://: the virtual board knows its parameters
     if dev is not None and getattr(dev, "params", None) is not None:
