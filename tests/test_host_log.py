@@ -68,6 +68,26 @@ def test_csv_opens_in_pandas_and_polars_with_default_options(tmp_path):
     assert pl["time_s"].is_sorted()
 
 
+def test_a_float_column_that_is_zero_all_run_is_still_read_as_floats(tmp_path):
+    """An idle log's torque and duty are 0 in every row: written "0", pandas and polars read them as int64, so a
+    column's type depended on what the run did."""
+    import pandas
+    import polars
+
+    path = tmp_path / "idle.csv"
+    w = LogWriter(path, simulator_metadata(load_params(), n=5))
+    for k in range(20):
+        w.write_telemetry(tlm(k)._replace(torque=0.0, duty=0.0, base_rate=0.0), seq=k + 1, time_us=1000 * (k + 1),
+                          host_time_s=0.001 * k)
+    w.close()
+    # not the IMU's: empty in every row of a log without one, which polars types as text whatever the writer does
+    floats = [c for c, kind, *_ in columns(5) if kind == "f8" and not c.startswith("imu_")]
+    df, pl = pandas.read_csv(path), polars.read_csv(path)
+    assert all(df[c].dtype == np.float64 for c in floats), [c for c in floats if df[c].dtype != np.float64]
+    assert all(pl[c].dtype == polars.Float64 for c in floats), [c for c in floats if pl[c].dtype != polars.Float64]
+    assert (df["torque_Nm"] == 0).all() and read_log(path).data["duty_frac"].tolist() == [0.0] * 20
+
+
 def test_time_is_the_device_clock_unwrapped_and_monotonic(tmp_path):
     path = tmp_path / "wrap.csv"
     _write(path, start_us=0xFFFFFFFF - 150_000).close()  # the u32 clock wraps 150 frames in

@@ -42,7 +42,16 @@ def _fmt(kind: str, name: str):
         return lambda v: " ".join(str(v).replace(",", ";").replace('"', "'").split())
     if name.endswith("time_s"):
         return lambda v: "" if math.isnan(v) else f"{v:.6f}"
-    return lambda v: "" if math.isnan(v) else f"{float(v):.9g}"  # round-trips an f32
+    return _float_cell
+
+
+def _float_cell(v) -> str:
+    """9 significant digits (round-trips an f32), and always a float's spelling: a column that is 0 all run (an idle
+    log's torque and duty) is read as floats by pandas and polars, not as integers."""
+    if math.isnan(v):
+        return ""
+    s = f"{float(v):.9g}"
+    return s if any(ch in s for ch in ".eEn") else s + ".0"
 
 
 def _line(fmts, row) -> str:
