@@ -50,6 +50,13 @@ def test_every_column_name_carries_its_unit():
     assert all(c.endswith(UNIT_SUFFIXES) for c in cols), [c for c in cols if not c.endswith(UNIT_SUFFIXES)]
 
 
+def test_the_code_columns_say_every_code_the_protocol_has():
+    """The mode column's text left out IDENTIFY (5), which `rodctl check` and `identify` log."""
+    meaning = {c: m for c, _, _, m in columns(5)}
+    assert all(f"{int(m)} {m.name}" in meaning["mode_code"] for m in P.Mode)
+    assert all(f"{f.name} {int(f)}" in meaning["flags_bits"] for f in P.TelemetryFlag)
+
+
 def test_csv_opens_in_pandas_and_polars_with_default_options(tmp_path):
     import pandas
     import polars

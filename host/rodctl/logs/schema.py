@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from rodctl.link import protocol as P
+
 # The format readers hand read_log the trailer (the counters written at a clean close) under this key, beside
 # its values merged into the metadata; read_log takes it out as Log.trailer (log-convert carries it over).
 TRAILER_KEY = "\0trailer"
@@ -22,11 +24,11 @@ BASE_COLUMNS = [
     ("host_time_s", "f8", "s", "host receive time since the session opened (arrives in USB batches)"),
     ("seq_count", "i8", "1", "device sequence number (contiguous unless frames were lost)"),
     ("device_time_us", "i8", "us", "raw device clock (u32, wraps after 71.6 min)"),
-    ("mode_code", "i8", "1", "0 DISARMED, 1 BALANCE, 2 SWING_UP, 3 FAULT, 4 CATCH"),
+    ("mode_code", "i8", "1", ", ".join(f"{int(m)} {m.name}" for m in P.Mode)),
     ("mode_name", "U8", "", "mode as text"),
     ("reason_code", "i8", "1", "last disarm/fault reason (docs/architecture.md)"),
     ("reason_name", "U12", "", "reason as text"),
-    ("flags_bits", "i8", "1", "DRIVER_ENABLED 1, NFAULT_LOW 2, HEARTBEAT_OK 4"),
+    ("flags_bits", "i8", "1", ", ".join(f"{f.name} {int(f)}" for f in P.TelemetryFlag)),
     ("encoder_count", "i8", "count", "raw encoder count (979.2 per output turn, 0 hanging at power-on)"),
     ("base_rate_rad_s", "f8", "rad/s", "base rate from the encoder tracking filter"),
     ("torque_Nm", "f8", "N m", "commanded torque at the output shaft"),
