@@ -155,6 +155,13 @@ def test_set_command_applies_nothing_when_one_value_is_bad(capsys):
     assert "catch_angle_deg=100 out of range" in capsys.readouterr().err
 
 
+def test_a_setting_given_twice_is_refused_before_anything_is_sent(capsys):
+    """It printed "swing_amplitude = 0.07 N m" twice, for 0.05 and 0.07, exit 0."""
+    assert cli.main(["set", "swing_amplitude=0.05", "swing_amplitude=0.07", "--port", "sim://"]) == 2
+    out, err = capsys.readouterr()
+    assert err.strip() == "rodctl: swing_amplitude given more than once; give each setting once" and not out
+
+
 def test_set_round_trip_changes_what_the_device_reports(session):
     session.set("swing_angle_deg", 45.0)
     session.set("swing_amplitude", 0.05)

@@ -62,6 +62,12 @@ def apply_settings(s: Session, assignments: list[str], args=None, *, out: Callab
     """SET every NAME=VALUE (all or none) and say to `out` what the board reports; `kept`: a SAVE_RIG follows,
     so the rig settings are not said to last only until the board resets."""
     parsed = [parse_assignment(a) for a in assignments]  # all names and numbers checked before anything is sent
+    names = [setting.name for setting, _ in parsed]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:  # which value would the user mean? the board would keep the last, and both were printed as it
+        from rodgains.errors import InputError
+
+        raise InputError(f"{', '.join(twice)} given more than once; give each setting once")
     params, _ = design_params(s, args)  # for the catch angle's range (the balance angle limit)
     now = s.set_all(parsed, design_params=params)  # every value range-checked, then all applied or none
     for setting, value in parsed:
