@@ -64,7 +64,7 @@ def run_status(args) -> int:
     th = ", ".join(f"{from_upright_deg(x):+.1f}" for x in r["theta_hat_rad"])
     print(f"telemetry   encoder {r['encoder_count']} counts, theta_hat [{th}] deg from upright, base rate "
           f"{r['base_rate_rad_s']:+.3f} rad/s, torque {r['torque_Nm']:.3g} N m, duty {r['duty']:.3g}")
-    print(f"counters    overruns {r['overruns']}, frames dropped {r['frames_dropped']}, rx errors {r['rx_errors']}")
+    print(f"counters    since boot: overruns {r['overruns']}, frames dropped {r['frames_dropped']}, rx errors {r['rx_errors']}")
     return 0
 
 
