@@ -58,13 +58,15 @@ def test_missing_explicit_port_is_one_line():
 
 
 @pytest.mark.parametrize("port, reason", [("bogus://x", "invalid URL, protocol 'bogus' not known"),
-                                          ("FILE", "not a serial port")])
+                                          ("FILE", "not a serial port"), ("FOLDER", "not a serial port")])
 def test_a_port_that_names_no_serial_device_is_bad_input(tmp_path, port, reason):
     """A mistyped URL scheme or a plain file given as --port is the user's input (exit 2), not a board that
     could not be reached (exit 1, as a port that is missing now and may be plugged in)."""
     if port == "FILE":
         port = str(tmp_path / "notes.txt")
         (tmp_path / "notes.txt").write_text("not a board\n")
+    if port == "FOLDER":  # it was pyserial's "[Errno 21] could not open port ...: Is a directory", exit 1
+        port = str(tmp_path)
     r = run_rodctl("status", "--port", port)
     assert r.returncode == 2
     assert _one_error_line(r) == f"rodctl: cannot open {port}: {reason}"

@@ -297,8 +297,8 @@ def open_serial(port: str, timeout: float = 0.05):
         kind = InputError if isinstance(e, BadURL) else UserError  # a bad sim:// URL is bad input
         if msg.startswith("sim://: "):  # the virtual board's own one-line reason (e.g. a missing params= file)
             raise kind(msg) from None
-        if "Could not configure port" in msg and "Inappropriate ioctl" in msg:  # a file that is no terminal
-            raise InputError(f"cannot open {port}: not a serial port") from None
+        if ("Could not configure port" in msg and "Inappropriate ioctl" in msg) or e.errno == errno.EISDIR:
+            raise InputError(f"cannot open {port}: not a serial port") from None  # a file or folder, no terminal
         raise kind(f"cannot open {port}: {msg}") from None
     except ValueError as e:  # pyserial's "invalid URL, protocol 'x' not known" and the like: the name is wrong
         raise InputError(f"cannot open {port}: {e}") from None
