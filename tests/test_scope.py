@@ -152,6 +152,16 @@ def test_scope_without_a_display_is_one_clear_line():
     assert len(lines) == 1 and lines[0].startswith("rodctl: the scope needs a display: no display")
 
 
+def test_the_headless_scopes_suggestion_keeps_what_the_user_asked_for(tmp_path):
+    """`scope --arm swing-up --duration 2 --record r.parquet` suggested a plain `rodctl log --port sim:// --out run.csv`."""
+    rec = tmp_path / "r.parquet"
+    r = subprocess.run([*RODCTL, "scope", "--port", "sim://", "--arm", "swing-up", "--duration", "2", "--record", str(rec),
+                        "--set", "rod.length=0.14"], capture_output=True, text=True, env=rodctl_env(), timeout=60)
+    assert r.returncode == 1 and not rec.exists()
+    assert (f"`rodctl log --port sim:// --arm swing-up --duration 2 --out {rec} --set rod.length=0.14`, then "
+            f"`rodctl plot {rec} --out run.png`") in r.stderr
+
+
 def test_the_headless_scopes_suggestion_pastes_into_a_shell():
     """The suggested command quotes a port with ? and & (zsh refuses an unmatched glob; bash runs `&` in the background)."""
     env = rodctl_env()  # headless: rodctl_env drops DISPLAY and WAYLAND_DISPLAY

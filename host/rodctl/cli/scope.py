@@ -61,6 +61,22 @@ def check_scope_args(args) -> None:
         load_params(args.params, args.overrides)  # a bad file is named now, not after the display and the board
 
 
+def log_instead(args, out: str) -> str:
+    """The `rodctl log` that records what this scope would have shown: its port, arming, duration, design."""
+    g = {k: getattr(args, k, None) for k in ("port", "arm", "duration", "format", "force")}
+    parts = ["rodctl", "log", "--port", g["port"] or "PORT"]
+    if g["arm"]:
+        parts += ["--arm", g["arm"]]
+    if g["duration"] is not None:
+        parts += ["--duration", f"{g['duration']:g}"]
+    parts += ["--out", out] + (["--format", g["format"]] if g["format"] else []) + (["--force"] if g["force"] else [])
+    if getattr(args, "params", None):
+        parts += ["--params", args.params]
+    for o in getattr(args, "overrides", None) or ():
+        parts += ["--set", o]
+    return " ".join(p if p == "PORT" else shlex.quote(p) for p in parts)
+
+
 def run_scope(args) -> int:
     from rodctl.cli.plot import display_problem
 
@@ -70,9 +86,9 @@ def run_scope(args) -> int:
     check_scope_args(args)
     why = display_problem()
     if why is not None:
-        raise UserError(f"the scope needs a display: {why}. Record instead with "
-                        f"`rodctl log --port {shlex.quote(args.port) if args.port else 'PORT'} --out run.csv`, then "
-                        "`rodctl plot run.csv --out run.png`")
+        out = getattr(args, "record", None) or "run.csv"
+        raise UserError(f"the scope needs a display: {why}. Record instead with `{log_instead(args, out)}`, then "
+                        f"`rodctl plot {shlex.quote(out)} --out run.png`")
     from rodctl.scope.loop import close_scope, open_scope, run_window, shot_saved
 
     stop = threading.Event()
