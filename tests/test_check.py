@@ -123,10 +123,18 @@ def test_a_wrong_gear_ratio_shows_in_the_motor_gain_too():
         in lines["motor"]
 
 
+def test_without_yes_an_input_that_ends_says_nobody_pressed_enter():
+    """Piped in with nothing to read, it said "--yes asks nobody", though --yes was never given."""
+    r, lines = check("sim://?hand=none", input="")
+    assert lines["encoder"].endswith("Why: turning the rod needs a hand: nobody pressed Enter (the input ended): run "
+                                     "the check from a terminal at the rod"), lines["encoder"]
+
+
 def test_yes_skips_the_hand_and_then_cannot_tell_encoder_from_motor():
     r, lines = check("sim://?hand=none&motor_sign=-1", "--yes")
     assert lines["encoder"] == ("SKIP encoder   still at rest, hanging 0 counts from zero; the direction was not "
-                                "checked. Why: turning the rod needs a hand (--yes asks nobody; without --yes, press Enter at the rod)")
+                                "checked. Why: turning the rod needs a hand: --yes asks nobody: run the check without "
+                                "--yes at the rod and press Enter")
     assert lines["motor"].endswith("Fix: the encoder or the motor is reversed: the encoder step with a hand "
                                    "(without --yes) tells which")
     assert r.returncode == 1

@@ -173,7 +173,7 @@ def encoder(ctx: Context) -> Result:
     ctx.say(f"encoder: {instruction}")
     if not ctx.user.do(instruction, ctx.session):
         return Result("encoder", SKIP, rest_text + "; the direction was not checked",
-                      "turning the rod needs a hand (--yes asks nobody; without --yes, press Enter at the rod)",
+                      f"turning the rod needs a hand: {ctx.user.no_hand}",
                       values)
     with Recording(ctx.session) as rec:
         rec.wait(HAND_WATCH_S, until=lambda rows: _turn_done(rows, hang, ctx.cpr))

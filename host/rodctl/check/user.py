@@ -9,6 +9,7 @@ class Person:
     """A person at the rig, asked on the terminal."""
 
     has_hand = True
+    no_hand = "nobody pressed Enter (the input ended): run the check from a terminal at the rod"
 
     def __init__(self, stdin=None, out=None):
         self.stdin = stdin or sys.stdin
@@ -24,6 +25,7 @@ class Nobody:
     """--yes: no questions; a step that needs a hand is skipped."""
 
     has_hand = False
+    no_hand = "--yes asks nobody: run the check without --yes at the rod and press Enter"
 
     def do(self, instruction: str, session) -> bool:
         return False
@@ -33,6 +35,7 @@ class VirtualHand:
     """sim://: the virtual board's own hand turns the rod (rodctl.sim.device.VirtualDevice.hand_turn)."""
 
     has_hand = True
+    no_hand = ""  # it always turns the rod
     TURN_S = 2.0  # out and back [s]
 
     def __init__(self, device):
