@@ -245,6 +245,17 @@ def test_an_existing_sim_device_link_file_is_bad_input(tmp_path):
     assert f.read_text() == "not a link\n"
 
 
+def test_an_earlier_sim_devices_link_is_replaced_whatever_it_points_at(tmp_path):
+    """The link of a board that ended (or still runs) points into /dev/pts, where nobody may make files: the check
+    looked there, not in the link's own folder, and said "cannot write into folder /dev/pts"."""
+    link = tmp_path / "port"
+    link.symlink_to("/dev/pts/999")
+    r = run_rodctl("sim-device", "--link", str(link), "--duration", "1")
+    assert r.returncode == 0, r.stderr
+    assert f"connect with: rodctl status --port {link}" in r.stdout
+    assert not link.is_symlink()  # replaced, then removed when the board stopped
+
+
 @pytest.mark.parametrize("argv, option", [
     (["sweep", "--grid", "rod.length=0.15", "--out", "{tmp}/old.parquet"], "--out"),
     (["sweep", "--grid", "rod.length=0.15", "--out", "{tmp}/s.parquet", "--plot", "{tmp}/old.png"], "--plot"),

@@ -133,6 +133,11 @@ def check_link(path: str) -> None:
     link = Path(path)
     if link.exists() and not link.is_symlink():
         raise InputError(f"--link {link} exists and is not a symlink; name another path")
+    if link.is_symlink():  # an earlier board's link: the folder it sits in is what must be writable, not its target's
+        from rodctl.cli.outputs import check_folder_writable
+
+        check_folder_writable(Path(os.path.abspath(link)).parent, f"--link {link}")
+        return
     check_output(link, "--link")
 
 
@@ -151,7 +156,9 @@ def register(sub) -> None:
     # None: the file's [plant] table, as sim:// and `rodctl sim` do; the board drives the faithful rod
     p.add_argument("--plant", choices=("inextensible", "der"),
                    help="simulated rod model (default: the parameter file's plant.model, as sim://)")
-    p.add_argument("--edges", type=int, help="plant edges (default: the parameters' N)")
+    p.add_argument("--edges", type=int, help="flexible edges of the simulated rod beyond its hub (default: the "
+                                               "parameter file's plant.edges)")
     p.add_argument("--link", metavar="PATH", help="also make PATH a symlink to the pseudo-terminal")
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds of wall time [s]")
+    p.add_argument("--duration", type=float, metavar="S",
+                   help="stop after S seconds of wall time [s] (the end says how far the device's clock got)")
     p.set_defaults(func=run_sim_device)

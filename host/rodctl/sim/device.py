@@ -317,7 +317,13 @@ class VirtualDevice:
         if self.faults.any:
             start += f"; wiring faults: {self.faults.describe()}"
         return (f"firmware N={self.edges} at {1 / self.period:g} Hz (parameters {self.params.sha256()[:16]}{over}), "
-                f"plant {self.kind} with {self.plant.N} edges, duty input, {start}")
+                f"plant {self.kind} with {self._plant_edges_text()}, duty input, {start}")
+
+    def _plant_edges_text(self) -> str:
+        """The faithful rod's flexible edges and its hub (one more coordinate), as --edges and plant.edges count."""
+        if self.plant.hub is None:
+            return f"{self.plant.N} edges"
+        return f"{self.plant.N - 1} edges + a {self.plant.hub * 1e3:g} mm hub"
 
 
 class RealTimeRunner:
