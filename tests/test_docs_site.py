@@ -183,6 +183,17 @@ def test_the_tutorial_runs_as_written(name, tmp_path):
         assert "FAULT" not in modes and "BALANCE" in modes, (name, log, modes)  # it balanced, nothing tripped
 
 
+def test_the_header_the_pages_show_is_the_committed_one():
+    """The first-power-on tutorial showed `check`'s identity line with a header hash from an older design: a reader
+    comparing it with their board's saw a mismatch that was not there."""
+    from rodgains.params import load_params
+
+    committed = load_params(paths.COMMITTED_PARAMS).sha256()[:12]
+    shown = {(page.name, h) for page in pages() for h in re.findall(r"header ([0-9a-f]{12}) = the design of",
+                                                                    page.read_text())}
+    assert shown and all(h == committed for _, h in shown), (committed, shown)
+
+
 def test_no_page_links_outside_the_site():
     """A link to a file outside docs/ would work on GitHub and break the site: they are code spans."""
     for page in DOCS.rglob("*.md"):
