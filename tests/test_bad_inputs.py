@@ -685,6 +685,18 @@ def test_check_of_a_header_that_is_not_text_says_it_is_stale(tmp_path):
                                    "parameters generate; regenerate with: ")
 
 
+@pytest.mark.parametrize("extra, said", [(["--arm", "balance", "--duration", "3"], "--arm, --duration"),
+                                         (["--window", "5"], "--window"), (["--port", "sim://"], "--port")])
+def test_scope_options_on_a_logs_plot_are_refused_not_dropped(extra, said, tmp_path):
+    """`plot LOG --arm balance --duration 3` drew the log and ignored them (exit 0): a user who meant --live got a
+    figure of an old run."""
+    log = tmp_path / "run.csv"
+    log.write_text("not read\n")
+    r = run_rodctl("plot", str(log), "--out", str(tmp_path / "x.png"), *extra)
+    assert r.returncode == 2 and not (tmp_path / "x.png").exists()
+    assert _one_line(r) == f"rodctl: {said}: only with --live (the scope of a board), not for a log's figure"
+
+
 # An empty name (an unset shell variable) is refused with the option's name, never taken for the default name,
 # for stdout, for "no such output" or for the current folder.
 EMPTY_NAME_CASES = [
