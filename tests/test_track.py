@@ -363,6 +363,23 @@ def test_frames_left_out_with_their_timestamps_are_timed_by_the_container(filmed
     assert np.abs(a.log_time(video_t) - whole.log_time(video_t)).max() <= 0.1 / 120, (a, whole)
 
 
+def test_a_still_rod_at_the_clips_ends_is_no_repeat_and_a_repeat_amid_motion_is():
+    """Where the motion test cannot judge (the first two frames and the last two), the picture alone decided: a rod
+    hanging still at the start shows the same picture twice and was called a dropped frame. A frame that repeats
+    its predecessor while the rod moves on is still one."""
+    from rodctl.track import REPEATED, flag_repeats
+
+    F = 12
+    still = np.zeros((F, 9, 2)) + np.arange(9)[None, :, None] * 20.0
+    moving = still + np.arange(F)[:, None, None] * 3.0  # 3 px a frame
+    moving[1] = moving[0]  # frame 1 shows frame 0 again
+    for pos, repeated in ((still, []), (moving, [1])):
+        quality, same = np.zeros(F, np.int8), np.zeros(F, bool)
+        same[1] = True
+        flag_repeats(pos.copy(), quality, same)
+        assert np.flatnonzero(quality == REPEATED).tolist() == repeated
+
+
 def test_a_rolled_camera_without_calibration_is_levelled(filmed, tmp_path):
     """The camera rolled 10 deg, no --calibrate: the roll the alignment measures is taken off every angle
     (it was left in: every edge 9 to 10 deg off)."""

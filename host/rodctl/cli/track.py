@@ -132,8 +132,11 @@ def run_track_command(args) -> int:
     q = r.counts()
     print(f"video: {r.frames} frames at {r.fps:g} fps; hub at ({r.hub_px[0]:.1f}, {r.hub_px[1]:.1f}) px, "
           f"{r.m_per_px * 1e3:.4f} mm/px")
+    # a repeat is a camera's dropped frame, or a frame its encoder skipped (a low bit rate): either shows the frame
+    # before at the wrong time, so it is not compared
     print(f"frames: {q['good']} {QUALITY_TEXT[0]}, {q['filled']} with {QUALITY_TEXT[1]}, {q['repeated']} "
-          f"{QUALITY_TEXT[3].replace('a ', '')}s, {q['unusable']} with {QUALITY_TEXT[2]}")
+          f"{QUALITY_TEXT[3].replace('a ', '')}s (dropped by the camera or skipped by its encoder), {q['unusable']} "
+          f"with {QUALITY_TEXT[2]}")
     print(f"alignment: the video's first frame at {a.offset_s:.4f} s of the log, {a.drift_text()}, "
           f"base angle correlation {a.correlation:.4f}, residual {np.degrees(a.residual_rad):.2f} deg, "
           f"camera minus encoder {np.degrees(a.angle_offset_rad):+.2f} deg")

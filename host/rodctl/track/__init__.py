@@ -168,13 +168,29 @@ def flag_repeats(pos_px: np.ndarray, quality: np.ndarray, same: np.ndarray) -> N
     also its predecessor's (detect_all), by over SAME_STILL_PX (a slow swing). A frame whose markers
     moved less than that is no repeat one can tell, nor does it matter. Where the markers cannot
     judge (the rod not seen around it), the picture alone decides."""
-    off_path, moved, judged = motion_test(pos_px, quality <= FILLED)
+    usable = quality <= FILLED
+    off_path, moved, judged = motion_test(pos_px, usable)
     stalled = judged & (off_path > STILL_PX) & (moved < REPEAT_SHARE * off_path)
     stalled |= judged & same & (off_path > SAME_STILL_PX) & (moved < SAME_MOVED_SHARE * off_path)
     _one_of_a_pair(stalled, moved)
-    repeated = np.where(judged, stalled, same)
+    repeated = np.where(judged, stalled, same & ~_still_around(pos_px, usable))
     quality[repeated] = REPEATED
     pos_px[repeated] = np.nan
+
+
+def _still_around(pos_px: np.ndarray, usable: np.ndarray) -> np.ndarray:
+    """Per frame: the markers stood still (under STILL_PX) from the frame before through the frame after, all three
+    seen. A rod hanging still at a clip's ends, where the motion test cannot judge, shows the same picture twice
+    without any frame being dropped (it was called a repeat); a dropped frame amid motion has a step beside it."""
+    F = len(pos_px)
+    out = np.zeros(F, bool)
+    if F < 3:
+        return out
+    step = np.full(F, np.inf)  # step[k]: from frame k - 1 to k [px]
+    both = usable[1:] & usable[:-1]
+    step[1:][both] = _max_px(pos_px[1:][both] - pos_px[:-1][both])
+    out[1:-1] = (step[1:-1] < STILL_PX) & (step[2:] < STILL_PX)
+    return out
 
 
 def _one_of_a_pair(stalled: np.ndarray, moved: np.ndarray) -> None:

@@ -16,7 +16,7 @@ from rodgains.errors import InputError
 # per-frame quality flags
 GOOD, FILLED, UNUSABLE, REPEATED = 0, 1, 2, 3
 QUALITY_TEXT = {GOOD: "every marker seen", FILLED: "a marker filled in from its neighbours",
-                UNUSABLE: "too few markers", REPEATED: "a repeated (dropped) frame"}
+                UNUSABLE: "too few markers", REPEATED: "a repeated frame"}
 
 HUB_TOL_PX = 3.0  # a marker this close to the same place in most frames is the hub's
 
