@@ -321,6 +321,22 @@ def test_report_points_a_rod_past_the_critical_length_to_the_soft_shaft():
     assert "NOTE: lqr.q_shaft_angle" not in soft.stdout + table_i.stdout
 
 
+def test_report_warns_where_the_design_cannot_work():
+    """A rod 1.23 x its buckling length falls in `rodctl sim` (ANGLE_LIMIT at 0.09 s), and a design model of 3
+    edges hunts: the report printed their numbers (the nominal unstable, 4.2 deg of phase margin, the model's period
+    13 % off) without a WARNING. Table I's rod with its own design gets none of these."""
+    past = rodctl("gains", "--report", "--set", "rod.length=0.20").stdout
+    assert "WARNING: the design does not hold the nominal rod even linearly: the rod above the hub is 1.23 x" in past
+    assert "phase margin 4.2 deg at the plant input  <- WARNING: the robustness matrix's torque constant +-15 %" in past
+    assert "with one extra period of delay: spectral radius 1.0169  <- WARNING: unstable" in past
+    coarse = rodctl("gains", "--report", "--set", "rod.edges=3").stdout
+    assert "WARNING: the design model's first hanging period is -13 % off the rod's" in coarse
+    table_i = rodctl("gains", "--report").stdout
+    assert "nominal rod even linearly" not in table_i and "hanging period is" not in table_i
+    assert "torque constant +-15 %" not in table_i and "delay tips" not in table_i
+    assert "unstable poles 8.49 rad/s" in table_i
+
+
 def test_a_stable_loop_is_never_printed_as_radius_1():
     """The tip IMU's gyro-bias state sits 9e-10 inside the unit circle: "1.000000" beside "stable" read as
     marginal. The report adds decimals until a radius under 1 reads under 1."""

@@ -60,6 +60,7 @@ def one_period_delay_radius(d: Design) -> float:
 # design's least damped mode, 0.27 at 10 Hz, makes 29 mN m, mostly single counts through its stiff
 # base-angle gain, and docs/tuned/low-ripple.toml's 12)
 RINGING_DAMPING_RATIO = 0.1
+KT_SPREAD = 0.15  # the robustness matrix's torque-constant cases, kt+15 and kt-15: the gain range must hold them [-]
 
 
 def least_damped(z: np.ndarray, dt: float, below_hz: float = np.inf) -> tuple[float, float] | None:
@@ -136,6 +137,7 @@ def report_text(d: Design) -> str:
     obs = np.linalg.eigvals(d.Ad - d.L @ d.C @ d.Ad)
     lo, hi = sampled.stable_gain_interval(d.loop)
     pm = sampled.phase_margin(d.loop)
+    delay_radius = one_period_delay_radius(d)
     rad_per_count = p.rad_per_count
     bare = paper_continuous_sampled(d, bare=True)
     conf = paper_continuous_sampled(d, bare=False)
@@ -155,7 +157,7 @@ def report_text(d: Design) -> str:
         _clamped_line(p),
         *_stiff_shaft_note(p, L_tot / lc_cont),
         "",
-        f"Open loop about upright: unstable poles {', '.join(f'{v:.3g}' for v in unstable) or 'none'} rad/s; "
+        f"Open loop about upright: unstable poles {', '.join(f'{v:.3g}' for v in unstable) + ' rad/s' if unstable else 'none'}; "
         f"fastest {open_loop.real.min():.3g} rad/s",
         "",
         f"Sampled design ({d.method}, ZOH at {rate:g} Hz, {d.observer_form}-estimate observer):",
@@ -166,8 +168,11 @@ def report_text(d: Design) -> str:
         f"  closed-loop spectral radius (plant + observer + LQR): {radius_text(d.checks['closed_loop_spectral_radius'], 6)}",
         # not the two lists above: the disturbance estimate's action closes a loop of its own (a slow integral mode)
         f"  closed-loop poles (slowest, as ln z / dt): {_poles(np.linalg.eigvals(d.loop()), d.dt)} rad/s",
-        f"  stable for actuator gain in [{lo:.3g}, {hi:.3g}]; phase margin {pm:.1f} deg at the plant input",
-        f"  with one extra period of delay: spectral radius {radius_text(one_period_delay_radius(d), 4)}",
+        f"  stable for actuator gain in [{lo:.3g}, {hi:.3g}]; phase margin {pm:.1f} deg at the plant input"
+        + (f"  <- WARNING: the robustness matrix's torque constant +-{100 * KT_SPREAD:g} % is outside it"
+           if not (lo < 1 - KT_SPREAD and hi > 1 + KT_SPREAD) else ""),
+        f"  with one extra period of delay: spectral radius {radius_text(delay_radius, 4)}"
+        + ("  <- WARNING: unstable: one late interrupt's worth of delay tips the loop" if delay_radius > 1 else ""),
         f"  one encoder count ({np.degrees(rad_per_count):.3f} deg) moves the torque by "
         f"{abs((d.K @ d.L).item()) * rad_per_count * 1e3:.3g} mN m",
         f"  least damped loop mode: {ring_hz:.3g} Hz, damping ratio {ring_zeta:.3f}"
