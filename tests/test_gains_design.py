@@ -347,6 +347,24 @@ def test_a_stable_loop_is_never_printed_as_radius_1():
     assert radius_text(0.99996, 4) == "0.99996"
 
 
+def test_check_reads_the_paths_it_was_given_however_they_are_spelled(tmp_path):
+    """A header made with --params my_rod.toml was "not what the parameters generate" to a check given
+    /abs/path/my_rod.toml: only the banner's spelling of the path differed. A changed parameter is still stale."""
+    import shutil
+
+    from rodgains.params import DEFAULT_PARAMS
+
+    shutil.copy(DEFAULT_PARAMS, tmp_path / "my_rod.toml")
+    made = rodctl("gains", "--params", "my_rod.toml", "--header", "h/rod_gains.h", cwd=tmp_path)
+    assert made.returncode == 0, made.stderr
+    same = rodctl("gains", "--check", "--params", str(tmp_path / "my_rod.toml"), "--header",
+                  str(tmp_path / "h" / "rod_gains.h"), cwd=tmp_path.parent)
+    assert same.returncode == 0 and same.stdout.startswith("up to date:"), same.stderr
+    other = rodctl("gains", "--check", "--params", "my_rod.toml", "--set", "rod.length=0.16", "--header",
+                   "h/rod_gains.h", cwd=tmp_path)
+    assert other.returncode == 1 and "not what the parameters generate" in other.stderr
+
+
 def test_check_of_a_header_never_written_says_missing(tmp_path):
     """It said the missing files were "not what the parameters generate"."""
     h = tmp_path / "never.h"

@@ -30,6 +30,37 @@ def regenerate_command(params_path: str | None, overrides: Sequence[str], header
     return " ".join(shlex.quote(x) for x in parts)
 
 
+def _regenerate_key(line: str):
+    """A generated file's "Regenerate: rodctl gains ..." line without the paths of --params and --header: one command
+    however they were spelled or wherever it ran (my_rod.toml from /tmp/rig, /tmp/rig/my_rod.toml from elsewhere).
+    What the paths held is the inputs' SHA-256 beside it, and the header is the file being compared."""
+    _, _, command = line.partition("Regenerate: ")
+    try:
+        words = shlex.split(command)
+    except ValueError:
+        return line
+    return tuple("PATH" if i and words[i - 1] in ("--params", "--header") else w for i, w in enumerate(words))
+
+
+def _comparable(text: str) -> list:
+    return [_regenerate_key(ln) if "Regenerate: " in ln else ln for ln in text.splitlines()]
+
+
+def stale(files: dict[Path, str]) -> list[Path]:
+    """Of the generated files ({path: text}), those missing or not holding their text, the regenerate command's paths
+    left out (`rodctl gains --check --params /tmp/rig/my_rod.toml` of a header made with --params my_rod.toml in
+    /tmp/rig is current)."""
+    out = []
+    for f, text in files.items():
+        try:
+            now = f.read_bytes().decode("utf-8") if f.is_file() else None
+        except UnicodeDecodeError:
+            now = ""  # not text: stale
+        if now is None or (now != text and _comparable(now) != _comparable(text)):
+            out.append(f)
+    return out
+
+
 def params_copy_text(p: Params, command: str) -> str:
     return (
         "# rod_gains.toml -- DO NOT EDIT: the parameters rod_gains.h was generated from.\n"

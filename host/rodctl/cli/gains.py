@@ -108,7 +108,7 @@ def run_gains(args) -> int:
 
         sys.stdout.write("\n".join(report_lines(d)) + "\n")
     if args.check:
-        stale = atomic_file.stale(files)
+        stale = gains_header.stale(files)
         if stale:
             missing = [str(f) for f in stale if not Path(f).exists()]
             names = ", ".join(str(f) for f in stale if str(f) not in missing)
