@@ -125,11 +125,17 @@ def test_online_without_the_platform_runs_platformio_and_summarizes_its_failure(
 
 
 def test_installed_platform_builds_offline(tmp_path, monkeypatch, capsys):
+    """The header regenerated is the one PlatformIO builds: the project's (it was this checkout's, whatever
+    --project-dir said), made from the parameters given."""
     args_file = _fake_pio(tmp_path, monkeypatch, output="SUCCESS\n", platform_installed=True)
     _offline(monkeypatch)
-    assert cli.main(["build", "--project-dir", str(_project(tmp_path))]) == 0
+    committed = paths.COMMITTED_HEADER.read_bytes()
+    project = _project(tmp_path)
+    assert cli.main(["build", "--project-dir", str(project), "--set", "rod.length=0.16"]) == 0
     assert args_file.read_text().split() == ["run", "-e", "teensy35"]
     assert "build: done" in capsys.readouterr().err
+    built = (project / "firmware" / "include" / "rod_gains.h").read_text()
+    assert "--set rod.length=0.16" in built and paths.COMMITTED_HEADER.read_bytes() == committed
 
 
 def test_platformio_as_a_python_module_is_found(tmp_path, monkeypatch):

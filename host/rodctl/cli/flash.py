@@ -28,13 +28,17 @@ from rodctl.link.session import is_tty
 BACK_ON_USB_S = 10.0  # how long a flashed board may take to come back on USB [s]
 
 
-def ensure_header(args) -> None:
-    """Regenerate firmware/include/rod_gains.h (+ .toml) when the parameters changed."""
+def ensure_header(args, project: Path) -> None:
+    """Regenerate the project's firmware/include/rod_gains.h (+ .toml) when the parameters changed: the one PlatformIO
+    builds (--project-dir's, not this checkout's)."""
     from rodctl.cli.gains import robust_progress
 
     print("checking the gains header against the parameters (designing) ...", file=sys.stderr, flush=True)
     t = time.monotonic()
-    d, files = gains_header.generated_files(args.params, args.overrides, None, progress=robust_progress)
+    header = project / paths.COMMITTED_HEADER.relative_to(paths.REPO)
+    d, files = gains_header.generated_files(args.params, args.overrides,
+                                            None if header.resolve() == paths.COMMITTED_HEADER.resolve() else str(header),
+                                            progress=robust_progress)
     stale = write_changed(files)
     if stale:
         shown = ", ".join(paths.shown(f) for f in stale)
@@ -99,7 +103,7 @@ def run(args, upload: bool) -> int:
         upload_port = args.upload_port or args.port
         if upload_port is None and not args.no_port_check:
             find_port(None)  # one clear line when no (or more than one) Teensy is on USB
-    ensure_header(args)
+    ensure_header(args, project)
     cmd = [*pio, "run", "-e", args.env]
     if upload:
         cmd += ["-t", "upload"]
@@ -133,7 +137,8 @@ def register(sub) -> None:
         p.add_argument("--params", metavar="FILE", help="parameter file (TOML); default: gains/rodgains/default.toml")
         p.add_argument("--set", metavar="SECTION.KEY=VALUE", action="append", default=[], dest="overrides",
                        help="override one parameter (repeatable)")
-        p.add_argument("--project-dir", metavar="DIR", help="PlatformIO project (default: the repository root)")
+        p.add_argument("--project-dir", metavar="DIR", help="PlatformIO project (default: the repository root); its "
+                                                           "firmware/include/rod_gains.h is the header regenerated")
         p.add_argument("--verbose", "-v", action="store_true", help="show PlatformIO's output as it runs")
         if upload:
             p.add_argument("--port", metavar="PORT", help="the board's serial port (default: the one Teensy on USB)")
