@@ -125,6 +125,16 @@ def test_sim_compile_failure_is_one_clear_line(tmp_path):
                                                  "rod_config.h:97:1: error: static assertion failed")
 
 
+@pytest.mark.parametrize("override", ["rod.length=0.015", "rod.density=50", "rod.thickness=0.0004",
+                                      "motor.gear_ratio=0.5"])
+def test_a_value_just_outside_the_plausible_range_gets_no_made_up_reading(override):
+    """0.015 m was answered "did you mean 1.5 m?", 50 kg/m^3 "5000", a ratio of 0.5 "500": no unit slip reads so."""
+    from host_tools import run_rodctl
+
+    r = run_rodctl("gains", "--check", "--set", override)
+    assert r.returncode == 2 and "is not a testbed's" in r.stderr and "did you mean" not in r.stderr
+
+
 @pytest.mark.parametrize("override, line", [
     ("rod.length=155", "rodctl: rod.length = 155 m is not a testbed's (plausible: 0.02 to 2 m): did you mean 0.155 m?"),
     ("rod.youngs_modulus=593",

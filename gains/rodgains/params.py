@@ -377,12 +377,34 @@ PLAUSIBLE: dict[str, tuple[float, float]] = {
 _UNIT_SLIPS = (1e-3, 1e3, 1e-2, 1e2, 1e-6, 1e6, 1e-1, 10.0)
 
 
+# A reading is offered only when it lands this many decades nearer the range's middle than the value typed: a unit
+# slip is a factor of 100 or 1000 away, a value just outside the range is a rig of its own ("0.015 m: did you mean
+# 1.5 m?" was no help).
+SLIP_DECADES = 1.5
+
+
+def _slip_guess(name: str, value: float, unitless: bool = False) -> float | None:
+    """The value read in another unit that lands in the plausible range, if that is clearly the slip; unitless (a
+    ratio): only a misplaced decimal point of a thousand (0.0204 for 20.4)."""
+    lo, hi = PLAUSIBLE[name]
+    if value <= 0:
+        return None
+    middle = math.sqrt(lo * hi) if lo > 0 else hi / 100.0
+
+    def off(v: float) -> float:  # decades from the middle
+        return abs(math.log10(v / middle))
+
+    fits = [value * f for f in ((1e-3, 1e3) if unitless else _UNIT_SLIPS) if lo <= value * f <= hi]
+    best = min(fits, key=off, default=None)
+    return best if best is not None and off(value) - off(best) >= SLIP_DECADES else None
+
+
 def _implausible(name: str, unit: str, value: float) -> str | None:
     lo, hi = PLAUSIBLE[name]
     if lo <= value <= hi:
         return None
-    u = "" if unit == "-" else f" {unit}"  # a ratio has no unit to name
-    guess = next((value * f for f in _UNIT_SLIPS if lo <= value * f <= hi and value != 0), None)
+    u = "" if unit == "-" else f" {unit}"
+    guess = _slip_guess(name, value, unitless=unit == "-")
     hint = f": did you mean {guess:g}{u}?" if guess is not None else ""
     return f"{value:g}{u} is not a testbed's (plausible: {lo:g} to {hi:g}{u}){hint}"
 
