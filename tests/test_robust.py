@@ -441,6 +441,26 @@ def _finished_trials(study: Path) -> int:
     return sum(1 for t in s.trials if t.state.name == "COMPLETE")
 
 
+def test_sigterm_stops_a_robustness_run_as_ctrl_c_does(tmp_path):
+    """docs/host.md: SIGTERM cuts short work that has an end with 130, as Ctrl-C does. robustness (and sim, bench)
+    died of the signal (143) and left the pool's semaphores behind."""
+    from host_tools import start_rodctl
+
+    p = start_rodctl("robustness", "--samples", "0", "--jobs", "1", "--json", "", "--plot", "", cwd=tmp_path)
+    try:
+        line = ""
+        while "robustness:" not in line:  # the runs have started
+            line = p.stderr.readline()
+            assert line, "robustness ended before its runs started"
+        p.send_signal(signal.SIGTERM)
+        _, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130 and err.strip().splitlines()[-1] == "rodctl: stopped by SIGTERM", err
+    assert "leaked semaphore" not in err and "Traceback" not in err
+
+
 def test_ctrl_c_keeps_finished_trials_and_the_study_resumes(tmp_path):
     study, out = tmp_path / "study", tmp_path / "tuned.toml"
     argv = [sys.executable, "-m", "rodctl.cli", "tune", "--cases", "nominal", "--samples", "0", "--seconds", "0.5",

@@ -155,8 +155,11 @@ def _main(parser, args) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    from rodctl.cli.common import stop_signals
+
     try:
-        return int(args.func(args) or 0)
+        with stop_signals():  # SIGTERM / SIGHUP end any command as Ctrl-C does: 130 (a command may handle its own)
+            return int(args.func(args) or 0)
     except UserError as e:
         print(f"rodctl: {e}", file=sys.stderr)
         return e.exit_code
