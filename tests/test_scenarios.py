@@ -152,6 +152,10 @@ def test_sim_writes_a_device_format_log_and_a_figure(tmp_path):
     assert (tmp_path / "b.png").stat().st_size > 10_000
     truth = np.loadtxt(tmp_path / "b.truth.csv", delimiter=",", skiprows=1)
     assert truth.shape == (2000, 1 + 1 + p["plant"]["edges"])  # time, the hub, the plant's edges
+    # torque_Nm is the firmware's command, as on a board (it was the torque the rod received: past the 0.2 N m
+    # limit in rows whose duty was 0.01): within the limit, and saturated where the catch asks for more
+    limit = p["safety"]["torque_limit"]
+    assert np.abs(data["torque_Nm"]).max() == pytest.approx(limit, rel=1e-6)
     # the same plot command that reads device logs reads the simulator's
     r = subprocess.run([sys.executable, "-m", "rodctl.cli", "plot", str(tmp_path / "b.csv"), "--out",
                         str(tmp_path / "p.png")], capture_output=True, text=True)

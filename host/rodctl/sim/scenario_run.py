@@ -42,12 +42,14 @@ def write_log(o, trace, path: Path) -> tuple[Path, Path]:
         mode = trace.mode if trace.mode is not None else np.full(len(trace.t), 1)
         duty = trace.duty if trace.duty is not None else np.zeros(len(trace.t))
         count = trace.count if trace.count is not None else np.zeros(len(trace.t), int)
+        # the firmware's command, as a board's telemetry carries it (the torque the rod received is the metrics')
+        torque = trace.torque_cmd if trace.torque_cmd is not None else trace.torque
         for k in range(len(trace.t)):
             m = int(mode[k])
             reason = trace.reason if m == 3 else 0
             enabled = m in (1, 2)
             msg = P.Telemetry(m, reason, (1 if enabled else 0) | 4, n, int(count[k]), float(est[k, n]),
-                              float(trace.torque[k]), float(duty[k]), 0, 0, 0, 0,
+                              float(torque[k]), float(duty[k]), 0, 0, 0, 0,
                               tuple(est[k, :n].tolist()), tuple(est[k, n:].tolist()))
             w.write_telemetry(msg, seq=k, time_us=(k * period_us) & 0xFFFFFFFF, host_time_s=float(trace.t[k]))
     finally:
