@@ -4,6 +4,7 @@ Testbed scenarios run on the faithful plant ([plant] table); every matrix case i
 tests/test_robustness_matrix.py, so the robust-* scenarios here are only sampled."""
 
 import math
+import os
 import subprocess
 import sys
 
@@ -161,6 +162,40 @@ def test_sim_writes_a_device_format_log_and_a_figure(tmp_path):
                         str(tmp_path / "p.png")], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "p.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("args, said", [
+    (["--all", "--scenario", "balance"], "--all and --scenario together"),
+    (["--all", "--log", "x.csv"], "--all and --log together"),
+    (["--plot", "x.png", "--no-plot"], "--plot and --no-plot together"),
+    (["--log", "x.csv", "--no-log"], "--log and --no-log together"),
+    (["--list", "--scenario", "nope"], "--list and --scenario together"),
+    (["--figures", "d"], "--figures is for --all"),
+    (["--table", "docs/scenarios.md"], "--table is for --all"),
+])
+def test_sim_options_that_contradict_or_go_unused_are_refused(args, said, tmp_path):
+    """Each ran with the option dropped, exit 0 (`--all --scenario balance` ran all 44)."""
+    r = subprocess.run([sys.executable, "-m", "rodctl.cli", "sim", *args], capture_output=True, text=True,
+                       cwd=tmp_path, env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert r.returncode == 2 and r.stderr.strip().startswith(f"rodctl: {said}") and not list(tmp_path.iterdir())
+
+
+def test_a_set_the_scenario_does_not_apply_is_said(tmp_path):
+    """fig3 runs the paper's model (no gearbox) and robust-backlash2 sets the play itself: their --set was recorded
+    in the figure's title and the log as applied, with no word that the run ignored it."""
+    from rodctl.sim.scenarios import SCENARIOS
+
+    assert SCENARIOS["fig3"].ignored(["gearbox.backlash_deg=3", "plant.edges=10", "rod.damping=0.002"]) == \
+        ["gearbox.backlash_deg=3", "plant.edges=10"]
+    assert SCENARIOS["robust-backlash2"].ignored(["gearbox.backlash_deg=0", "rod.length=0.15"]) == \
+        ["gearbox.backlash_deg=0"]
+    assert SCENARIOS["robust-E-15"].ignored(["rod.youngs_modulus=6e5"]) == []  # scaled by the case, so applied
+    assert SCENARIOS["balance"].ignored(["gearbox.backlash_deg=0"]) == []
+    r = subprocess.run([sys.executable, "-m", "rodctl.cli", "sim", "--scenario", "robust-backlash2", "--set",
+                        "gearbox.backlash_deg=0", "--duration", "0.2", "--no-log", "--no-plot"], capture_output=True,
+                       text=True)
+    assert r.stderr.splitlines()[0] == ("rodctl: warning: robust-backlash2 sets or leaves out gearbox.backlash_deg "
+                                        "(docs/scenarios.md): --set gearbox.backlash_deg=0 is not applied")
 
 
 def test_sim_rejects_bad_input_with_one_line():

@@ -71,7 +71,7 @@ def _outputs(args, name: str, all_mode: bool) -> tuple[Path | None, Path | None]
 
         if SCENARIOS[name].group == "robustness":  # 27 of them: the table carries their numbers
             return None, None
-        folder = Path(args.figures)
+        folder = Path(args.figures or "docs/img")
         return folder / f"sim-{name}.png", None
     plot = None if args.no_plot else Path(args.plot or f"sim-{name}.png")
     log = None if args.no_log else Path(args.log or f"sim-{name}.csv")
@@ -117,10 +117,28 @@ def check_table_page(readme: Path) -> None:
     check_markers(readme, text)
 
 
+def check_sim_options(args) -> None:
+    """Options that contradict each other, or that the run would drop without a word: one line, exit 2."""
+    given = {"--scenario": args.scenario is not None, "--plot": args.plot is not None, "--log": args.log is not None,
+             "--figures": args.figures is not None, "--table": args.readme is not None, "--all": args.all,
+             "--no-plot": args.no_plot, "--no-log": args.no_log}
+    pairs = [("--list", "--scenario"), ("--list", "--all"), ("--all", "--scenario"), ("--all", "--plot"),
+             ("--all", "--log"), ("--plot", "--no-plot"), ("--log", "--no-log")]
+    given["--list"] = args.list
+    for a, b in pairs:
+        if given[a] and given[b]:
+            why = {"--all": "--all runs every scenario, its figures into --figures and no logs"}.get(a, "pick one")
+            raise InputError(f"{a} and {b} together: {why}")
+    for flag in ("--figures", "--table"):
+        if given[flag] and not args.all:
+            raise InputError(f"{flag} is for --all (every scenario); one scenario's figure is --plot")
+
+
 def run_sim(args) -> int:
     from rodctl.sim.scenario_table import replace_table, table_markdown
     from rodctl.sim.scenarios import DEFAULT, SCENARIOS
 
+    check_sim_options(args)
     if args.list:
         width = max(len(name) for name in SCENARIOS)
         for name, s in SCENARIOS.items():
@@ -140,6 +158,11 @@ def run_sim(args) -> int:
     for name in names:
         if name not in SCENARIOS:
             raise InputError(f"unknown scenario {name!r}; one of: {', '.join(SCENARIOS)} (rodctl sim --list)")
+    for name in names:  # a --set the scenario sets itself would be recorded as applied, and is not
+        ignored = SCENARIOS[name].ignored(list(args.overrides) + shorthand)
+        if ignored:
+            print(f"rodctl: warning: {name} sets or leaves out {', '.join(o.split('=', 1)[0].strip() for o in ignored)} "
+                  f"(docs/scenarios.md): {' '.join('--set ' + o for o in ignored)} is not applied", file=sys.stderr)
     if any(SCENARIOS[n].group != "paper" for n in names):  # the faithful plant's: refused before a compile
         from rodctl.sim.plant import check_faithful
 
@@ -191,7 +214,7 @@ def register(sub) -> None:
                    "(shorthand for --set plant.edges=N)")
     s.add_argument("--duration", type=float, metavar="S", help="simulated time [s] (default: the scenario's)")
     s.add_argument("--all", action="store_true", help="run every scenario (figures into --figures, no logs)")
-    s.add_argument("--figures", metavar="DIR", default="docs/img", help="with --all: where figures go (docs/img)")
+    s.add_argument("--figures", metavar="DIR", help="with --all: where figures go (default docs/img)")
     s.add_argument("--table", "--readme", dest="readme", metavar="PATH",
                    help="with --all: replace the scenario table between its markers in this page (docs/scenarios.md)")
     s.set_defaults(func=run_sim)

@@ -140,6 +140,16 @@ class Scenario:
     # True: must pass; False: a documented failure (docs/control.md says why and what passes instead);
     # None: measured, not asserted (an in-range matrix case: with the gearbox's play the rod rests near the band)
     expect_pass: bool | None = True
+    # the parameters the scenario sets itself ("section.key", or "section.*"): a --set of one is not applied
+    pinned: tuple[str, ...] = ()
+
+    def ignored(self, overrides) -> list[str]:
+        """Of "section.key=value" overrides, those this scenario does not apply."""
+        def key(o: str) -> str:
+            return o.split("=", 1)[0].strip().rstrip("*+-/")
+
+        return [o for o in overrides if any(key(o) == k or (k.endswith(".*") and key(o).startswith(k[:-1]))
+                                            for k in self.pinned)]
 
 
 @dataclass
@@ -266,6 +276,18 @@ def _bare(p: Params) -> Params:
                             "observer.process_noise_torque=0.0", *FIGURE_WEIGHTS)
 
 
+def _keys(overrides) -> tuple[str, ...]:
+    """The keys that overrides set outright ("k=v"); a scaled one ("k*=f") scales the user's value, so it is applied."""
+    return tuple(o.split("=", 1)[0].strip() for o in overrides if not o.split("=", 1)[0].endswith(("*", "+", "-", "/")))
+
+
+# The paper's figures run its model: no gearbox, no faithful plant, torque input, the bare rod's design.
+PAPER_PINS = ("plant.*", "gearbox.*", "encoder.zero_error_deg", "encoder.location", "motor.inductance",
+              *_keys(("rod.edges=5", "motor.design_includes_motor=false", "motor.rotor_inertia=0.0",
+                      "motor.viscous_friction=0.0", "motor.coulomb_friction=0.0", "lqr.friction_compensation=0.0",
+                      "observer.process_noise_torque=0.0", *FIGURE_WEIGHTS)))
+
+
 def _outcome(name, title, traces, passed, criterion, p, note="") -> Outcome:
     return Outcome(name, title, traces, {tr.label: metrics(tr) for tr in traces}, bool(passed), criterion, p, note)
 
@@ -385,10 +407,12 @@ _register(Scenario("swingup", "Swing-up and balance on the testbed (Table I rod,
                    swingup, "testbed", expect_pass=False))
 _register(Scenario("balance", "Balance from 30 deg: output feedback, quantization, torque limit, gearbox", "(d)",
                    balance, "testbed", expect_pass=False))
-_register(Scenario("fig2", "Zero input vs clamped base vs state feedback, N = 20, L = 12 cm", "Fig. 2", fig2))
+_register(Scenario("fig2", "Zero input vs clamped base vs state feedback, N = 20, L = 12 cm", "Fig. 2", fig2,
+                   pinned=PAPER_PINS + ("rod.length",)))
 _register(Scenario("fig3", "Swing-up (0.01 N m, 30 deg) and switch to output feedback, paper's model", "Fig. 3",
-                   fig3))
-_register(Scenario("fig4", "State feedback below, at and above the critical length", "Fig. 4", fig4))
+                   fig3, pinned=PAPER_PINS + ("swing_up.amplitude", "swing_up.angle_deg", "swing_up.catch_angle_deg")))
+_register(Scenario("fig4", "State feedback below, at and above the critical length", "Fig. 4", fig4,
+                   pinned=PAPER_PINS + ("rod.length",)))
 def _register_robust() -> None:
     from rodctl.sim.matrix import CASES, KNOWN_FAILURES
 
@@ -397,11 +421,12 @@ def _register_robust() -> None:
             continue  # that is `balance` and `swingup`
         known = any((case.name, t) in KNOWN_FAILURES for t in case.tasks)
         _register(Scenario(f"robust-{case.name}", f"Robustness: {case.title}", "(e)", robust(f"robust-{case.name}"),
-                           "robustness", expect_pass=False if known else None))
+                           "robustness", expect_pass=False if known else None,
+                           pinned=_keys(case.plant_overrides + case.design_overrides)))
     # The paper's bare-rod design on the real motor: 11 x the base inertia it assumed. It fails, which is
     # why the default design includes the motor (motor.design_includes_motor = true).
     _register(Scenario("robust-motor", "Robustness: the paper's design, which leaves the motor out", "(e)",
-                       robust("robust-motor"), "robustness", expect_pass=False))
+                       robust("robust-motor"), "robustness", expect_pass=False, pinned=_keys(MOTOR_IGNORED)))
 
 
 _register_robust()
