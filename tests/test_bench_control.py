@@ -90,6 +90,23 @@ def test_control_quick_skips_the_matrix_and_the_longest_rod(monkeypatch):
     assert got["nominal_balance_settle_s"] == float("inf")  # never settled reads as a miss, not a crash
 
 
+def test_the_json_of_a_time_that_never_came_is_strict(monkeypatch, tmp_path, capsys):
+    """A settle that never came was written as Infinity, which JSON.parse and jq refuse: it is null. The run says
+    each stage as it starts (it was silent for two minutes)."""
+    def never(params, case, task, keep_log=False, **kw):
+        r = {"settle_s": None, "caught_at_s": None, "final_dev_deg": 5.0}
+        if keep_log:
+            r["log"] = {"time": np.arange(0.0, 12.0, 1e-3), "torque": np.zeros(12000)}
+        return r
+
+    monkeypatch.setattr(M, "run_case", never)
+    out = tmp_path / "bench.json"
+    assert main(["bench", "--only", "control", "--quick", "--json", str(out)]) == 1
+    text = out.read_text()
+    assert "Infinity" not in text and json.loads(text)["nominal_balance_settle_s"] is None
+    assert "  control: nominal balance and swing-up" in capsys.readouterr().err
+
+
 def test_an_existing_json_is_refused_before_measuring_unless_forced(monkeypatch, tmp_path, capsys):
     measured = []
     monkeypatch.setattr(M, "run_case", lambda *a, **kw: measured.append(a) or _fake_run_case(0.8, 0.015)(*a, **kw))

@@ -21,13 +21,15 @@ def _final_deg(r: dict) -> float:
     return r["final_dev_deg"] if r["fault_reason"] == 0 and r["final_dev_deg"] is not None else 180.0
 
 
-def measure(quick: bool = False) -> dict[str, float]:
+def measure(quick: bool = False, say=lambda text: None) -> dict[str, float]:
+    """say(text): each stage as it starts (the whole takes about two minutes on 2 cores)."""
     import numpy as np
     from rodgains.params import load_params
 
     from rodctl.sim import matrix as M
 
     p = load_params()
+    say("nominal balance and swing-up, the swing-up on a low supply")
     bal = M.run_case(p, M.CASES["nominal"], "balance")
     swing = M.run_case(p, M.CASES["nominal"], "swingup", keep_log=True)
     log = swing.pop("log")
@@ -45,11 +47,13 @@ def measure(quick: bool = False) -> dict[str, float]:
                      seconds=8.0)
     out["low_supply_swingup_catch_s"] = round(low["caught_at_s"] if low["caught_at_s"] is not None else inf, 3)
     if not quick:  # the whole matrix (78 runs), 3 deg of play and the three longest-rod walks: a few minutes
+        say("the robustness matrix")
         rows = M.run_matrix(p)
         out["matrix_runs_passing"] = sum(1 for r in rows if r["passed"])
         out["matrix_runs"] = len(rows)
         wide = [r for r in rows if r["case"] == "backlash3"]
         out["backlash3_final_deg"] = round(max(r["final_dev_deg"] for r in wide), 2)
+        say(f"the boot zero at {len(ZERO_PLACES_DEG)} places in its count")
         ends = [M.run_case(p, M.CASES["nominal"], task, plant_params=p.with_overrides(f"encoder.zero_error_deg={z}"))
                 for z in ZERO_PLACES_DEG for task in M.TASKS]
         out["zero_place_worst_final_deg"] = round(max(map(_final_deg, ends)), 2)
@@ -62,13 +66,16 @@ def measure(quick: bool = False) -> dict[str, float]:
                  ("longest_rod_ratio_imu_no_play", imu.with_overrides("gearbox.backlash_deg=0", "lqr.imu_flank_torque=0"),
                   imu_walk))
         for key, q, how in walks:
+            say(f"{key}: the longest rod held")
             r = M.longest_balanced(q, band_deg=M.ROBUST_BAND_DEG, **how)
             out[key] = r["ratio"] if r["ratio"] is not None else 0.0
         # issue 35: the Table I rod 15 % softer and 15 % denser (0.99 x its clamped buckling length) with the tip
         # IMU and a design for that rod, as rodctl identify's file gives it: the larger end deviation of both tasks
         for key, name in (("imu_own_design_e_minus15_final_deg", "E-15"), ("imu_own_design_rho_plus15_final_deg", "rho+15")):
+            say(f"{key}: the tip IMU, {name} under its own design")
             runs = [M.run_case(imu, M.own_design(M.CASES[name]), task) for task in M.TASKS]
             out[key] = round(max(map(_final_deg, runs)), 2)
+        say("a rod curved at rest under its own design")
         out["curved_own_design_within_4deg_s"] = curved_within_s(p, CURVED_BAND_DEG)
     return out
 

@@ -117,7 +117,8 @@ def measure(groups: set[str], quick: bool = False) -> dict:
     if "control" in groups:
         from rodctl.bench import control as bench_control
 
-        out.update(bench_control.measure(quick=quick))
+        out.update(bench_control.measure(quick=quick, say=lambda text: print(f"  control: {text}", file=sys.stderr,
+                                                                             flush=True)))
     if "track" in groups:
         from rodctl.bench import track as bench_track
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sys
 
 from rodgains.errors import InputError
@@ -41,7 +42,9 @@ def run_bench(args) -> int:
     if args.json:
         from rodgains.atomic_file import atomic_write
 
-        atomic_write(args.json, json.dumps(results, indent=1) + "\n")
+        # strict JSON: a time that never came (inf) is null, which JSON.parse and jq read
+        finite = {k: (v if not isinstance(v, float) or math.isfinite(v) else None) for k, v in results.items()}
+        atomic_write(args.json, json.dumps(finite, indent=1, allow_nan=False) + "\n")
         print(f"wrote {args.json}")
     return 1 if missed else 0
 
