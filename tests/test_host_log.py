@@ -428,7 +428,7 @@ def test_plot_snapshots_are_taken_at_events():
     dev = np.where(t < 1.0, 0.5, 0.3 * np.exp(-(t - 1.0) / 0.1))  # caught at 17 deg, within 2 deg from 1.2151 s on
     th = np.column_stack([math.pi + dev] * 3)
     ev = dict(events_of(mode, th, t))
-    assert ev == {"start": 0, "catch": 1000, "settle": 1216, "end": 2999}
+    assert ev == {"start": 0, "catch": 1000, "estimate settled": 1216, "end": 2999}
 
 
 def test_a_killed_parquet_log_is_named_not_misread(tmp_path):

@@ -88,7 +88,7 @@ def run_plot(args) -> int:
 def register(sub) -> None:
     p = sub.add_parser("plot", help="plot a log (time series, rod shapes, edge angles) or open the live scope",
                        description="Plot a rodctl log (CSV, Parquet or MCAP): every angle estimate, torque, duty and "
-                                   "mode vs time, rod shapes at events (start, catch, settle, fault, end; paper "
+                                   "mode vs time, rod shapes at events (start, catch, the estimate settled within 2 deg, fault, end; paper "
                                    "Fig. 5) and every edge angle from the nearest upright (Fig. 6). --out writes a "
                                    "PNG (Agg, works headless; an existing one is kept unless --force); without --out a "
                                    "window opens, or LOG.png is written (replaced) when there is no display. --live is "

@@ -5,7 +5,8 @@
     save_figure(fig, "run.png")                        # Agg
 
 Angles are shown from the nearest upright (0 = upright whichever way the rod came over, hanging
-= -180 deg). Rod shapes are drawn at events (start, catch, settle, fault, end), not evenly in time.
+= -180 deg). Rod shapes are drawn at events (start, catch, the estimate settled: every edge within 2 deg for 0.5 s, fault,
+end), not evenly in time.
 Long logs are drawn as a min/max envelope per pixel column, so a 1,000,000-frame log plots in
 bounded time and memory (see `rodctl bench`, plot_log_mb_per_s).
 """
@@ -82,7 +83,7 @@ def events_of(mode: np.ndarray, th: np.ndarray, t: np.ndarray) -> list[tuple[str
         j = np.searchsorted(tc, tc + SETTLE_HOLD_S)  # first row after each row's hold window
         held = (bad[j] == bad[np.arange(len(tc))]) & (tc[np.maximum(j - 1, 0)] - tc >= 0.99 * SETTLE_HOLD_S)
         if held.any():
-            out.append(("settle", catch + int(np.argmax(held))))
+            out.append(("estimate settled", catch + int(np.argmax(held))))  # the log has no truth: not the sim's rule
     fault = np.flatnonzero(mode == P.Mode.FAULT)
     if fault.size:
         out.append(("fault", int(fault[0])))
