@@ -100,7 +100,7 @@ def make_figure(o: Outcome, snapshots: int = 6):
         err[tr.mode != 1] = np.nan
         for i in range(n):
             ax_e.plot(tr.t, err[:, i], lw=0.8, label=f"edge {i + 1}")
-        ax_e.set_ylabel("estimate - true [deg]")
+        ax_e.set_ylabel("estimate - true [deg]" if len(firmware) == 1 else f"{tr.label}: estimate - true [deg]")
         # above the panel: inside, it covered the error right after the catch
         ax_e.legend(fontsize=6, ncol=min(n, 10), loc="lower right", bbox_to_anchor=(1.0, 1.0), borderaxespad=0.2,
                     frameon=False)
