@@ -198,6 +198,20 @@ def test_a_set_the_scenario_does_not_apply_is_said(tmp_path):
                                         "(docs/scenarios.md): --set gearbox.backlash_deg=0 is not applied")
 
 
+def test_a_testbed_run_that_falls_exits_1_and_a_documented_lean_exits_0():
+    """A rod 1.23 x its buckling length trips ANGLE_LIMIT in balance: it exited 0, as the default rig's documented
+    lean does, so a script could not tell "settled 2.5 deg off" from "fell"."""
+    fell = subprocess.run([sys.executable, "-m", "rodctl.cli", "sim", "--scenario", "balance", "--set",
+                           "rod.length=0.20", "--no-log", "--no-plot"], capture_output=True, text=True)
+    assert fell.returncode == 1 and "FAULT ANGLE_LIMIT" in fell.stdout
+    assert fell.stderr.strip().endswith("balance failed where it must pass (a testbed run must not fall)")
+    lean = subprocess.run([sys.executable, "-m", "rodctl.cli", "sim", "--scenario", "balance", "--no-log",
+                           "--no-plot"], capture_output=True, text=True)
+    assert lean.returncode == 0 and "FAIL:" in lean.stdout
+    assert lean.stdout.strip().endswith("a documented fail on a rig with play (the rod held, off the 1 deg goal: "
+                                        "docs/control.md); exit 0")
+
+
 def test_sim_rejects_bad_input_with_one_line():
     for args, needle in ((["--scenario", "fig9"], "unknown scenario 'fig9'"),
                          (["--edges", "1"], "plant.edges"), (["--plant", "rigid"], "plant.model")):

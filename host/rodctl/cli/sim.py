@@ -178,15 +178,20 @@ def run_sim(args) -> int:
             print(line)
         print(f"  simulated {sim_seconds:.1f} s in {wall:.2f} s" + (f"; wrote {', '.join(written)}" if written else ""))
         expected = SCENARIOS[name].expect_pass
-        if expected and not o.passed:
+        fell = SCENARIOS[name].group == "testbed" and any(tr.fell for tr in o.traces)
+        if (expected and not o.passed) or fell:  # the testbed's documented fail is a lean, never a fall
             unexpected.append(name)
         elif expected is False and o.passed:  # another rig's file, or a better design: good news, not an error
             print(f"  {name} passes, where the default rig's documented outcome is a fail (docs/scenarios.md)")
+        elif expected is False and not fell and SCENARIOS[name].group == "testbed":
+            print(f"  {name}: a documented fail on a rig with play (the rod held, off the 1 deg goal: "
+                  "docs/control.md); exit 0")
     if args.all and args.readme:
         replace_table(Path(args.readme), table_markdown(outcomes))
         print(f"updated the scenario table in {args.readme}")
     if unexpected:
-        print(f"rodctl sim: {', '.join(unexpected)} failed where it must pass", file=sys.stderr)
+        print(f"rodctl sim: {', '.join(unexpected)} failed where it must pass (a testbed run must not fall)",
+              file=sys.stderr)
         return 1
     return 0
 
@@ -197,8 +202,8 @@ def register(sub) -> None:
         description="Run a scenario: the firmware's own C (SIL library built for the parameters) against the "
                     "simulated rod, motor, driver and encoder; or the paper's state-feedback figures. Writes a PNG "
                     "and a log in the device log format (rodctl plot reads it), and prints the metrics. Exit 1 "
-                    "when a scenario that must pass fails; one whose documented outcome on the default rig is a fail "
-                    "(docs/scenarios.md) exits 0 either way.")
+                    "when a scenario that must pass fails, or a testbed run (balance, swingup) falls (FAULT); one "
+                    "whose documented outcome on the default rig is a fail (docs/scenarios.md) exits 0 otherwise.")
     add_param_args(s)
     s.add_argument("--scenario", metavar="NAME", help="scenario to run (default: swingup); see --list")
     s.add_argument("--list", action="store_true", help="list the scenarios and exit")
