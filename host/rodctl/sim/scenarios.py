@@ -14,7 +14,8 @@ Metrics (true rod state, every link):
   catch (inf if any link is outside during the last 5 % of the run);
 - overshoot_deg: the largest excursion past upright, on the side opposite to where the rod started
   (or where it was caught);
-- peak_torque_Nm: the largest torque the rod received after arming (after the catch for swing-up);
+- peak_torque_Nm: the largest torque the rod received after arming (after the catch for swing-up) while the driver
+  was on (a FAULT turns it off: the plant's motor then brakes on its back-EMF, which is no command's torque);
 - swingup_s: when the firmware switched from swing-up to balance;
 - est_rms_deg: RMS over links and time of theta-hat minus the true angle from 0.5 s after the
   catch (the plant's edges averaged onto the controller's when their counts differ).
@@ -99,10 +100,11 @@ def metrics(tr: Trace) -> dict[str, float]:
     sd = tr.signed_deviation_deg
     side = np.sign(np.mean(sd[k0])) or 1.0
     overshoot = float(max(0.0, np.max(-side * sd[after]))) if after.any() else 0.0
+    driven = after & (tr.mode != MODE_FAULT) if tr.mode is not None else after
     m = {
         "settle_s": settle,
         "overshoot_deg": overshoot,
-        "peak_torque_Nm": float(np.max(np.abs(tr.torque[after]))) if after.any() else 0.0,
+        "peak_torque_Nm": float(np.max(np.abs(tr.torque[driven]))) if driven.any() else 0.0,
         "final_dev_deg": final,
         "max_dev_deg": float(dev.max()),
         "swingup_s": tr.caught_at if tr.caught_at is not None else math.nan,
