@@ -104,6 +104,19 @@ def test_the_imu_makes_every_mode_more_visible(imu_params, imu_design):
     assert min(r["seen_with_imu"] / r["seen_encoder"] for r in rows) > 10  # each mode at least 10 x better seen
 
 
+def test_the_imu_designs_report_prints_no_numpy_warnings(imu_design):
+    """The IMU's latency puts poles at z = 0, whose ln z / dt leaked two RuntimeWarnings with source paths onto
+    stderr; they are infinitely fast and never among the slowest poles printed."""
+    import warnings
+
+    from rodgains.report import report_text
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        text = report_text(imu_design)
+    assert "closed-loop poles (slowest, as ln z / dt):" in text and "inf" not in text and "nan" not in text
+
+
 def test_with_the_imu_every_matrix_case_short_of_buckling_is_linearly_stable_without_dry_friction(imu_design):
     from rodctl.sim.linear_check import corner_radii
 

@@ -14,7 +14,9 @@ from .rod_model import RodModel
 
 
 def _poles(z: np.ndarray, dt: float, k: int = 4) -> str:
-    """The k slowest discrete poles as s = ln(z)/dt [rad/s]."""
+    """The k slowest discrete poles as s = ln(z)/dt [rad/s]; poles at z = 0 (a pure delay's, the tip IMU's latency)
+    are infinitely fast and never among them."""
+    z = z[np.abs(z) > 0]
     s = np.log(z.astype(complex)) / dt
     s = s[np.argsort(-s.real)][:k]
     return ", ".join(f"{v.real:.3g}{v.imag:+.3g}j" if abs(v.imag) > 1e-9 else f"{v.real:.4g}" for v in s)
