@@ -707,6 +707,25 @@ def test_scope_options_on_a_logs_plot_are_refused_not_dropped(extra, said, tmp_p
     assert _one_line(r) == f"rodctl: {said}: only with --live (the scope of a board), not for a log's figure"
 
 
+def test_a_bad_value_in_a_file_names_the_file_and_a_byte_order_mark_is_no_error(tmp_path):
+    """A key error named the file, a value error did not ("rodctl: rod.density: must be > 0"); a date printed as
+    Python's datetime.date(...); a file saved with a byte-order mark was "not valid TOML" at line 1."""
+    from rodgains.params import DEFAULT_PARAMS
+
+    text = DEFAULT_PARAMS.read_text()
+    for name, changed, said in (("neg.toml", "density = -5.0", "neg.toml: rod.density: must be > 0 [kg/m^3], got -5.0"),
+                                ("date.toml", "density = 1979-05-27",
+                                 "date.toml: rod.density: expected a number [kg/m^3], got 1979-05-27")):
+        (tmp_path / name).write_text(text.replace("density = 1080.0", changed, 1))
+        r = run_rodctl("gains", "--check", "--params", name, cwd=tmp_path)
+        assert r.returncode == 2 and _one_line(r) == f"rodctl: {said}"
+    fixed = run_rodctl("gains", "--check", "--params", "neg.toml", "--set", "rod.density=-1", cwd=tmp_path)
+    assert _one_line(fixed) == "rodctl: rod.density: must be > 0 [kg/m^3], got -1.0"  # the --set's, not the file's
+    (tmp_path / "bom.toml").write_bytes(b"\xef\xbb\xbf" + text.encode())
+    r = run_rodctl("gains", "--check", "--params", "bom.toml", cwd=tmp_path)
+    assert r.returncode == 0 and r.stdout.startswith("up to date:"), r.stderr  # the defaults' header, spelled apart
+
+
 # An empty name (an unset shell variable) is refused with the option's name, never taken for the default name,
 # for stdout, for "no such output" or for the current folder.
 EMPTY_NAME_CASES = [

@@ -410,8 +410,12 @@ def _implausible(name: str, unit: str, value: float) -> str | None:
 
 
 def _toml(value: Any) -> str:
-    """A value as the parameter file spells it (true, not Python's True)."""
-    return ("true" if value else "false") if isinstance(value, bool) else repr(value)
+    """A value as the parameter file spells it (true, not Python's True; a date as 1979-05-27)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if hasattr(value, "isoformat"):  # TOML's dates and times
+        return value.isoformat()
+    return repr(value)
 
 
 def _coerce(name: str, key: Key, value: Any, plausible: bool = True) -> Any:
@@ -463,7 +467,7 @@ def load_params(path: str | Path | None = None, overrides: list[str] | tuple[str
     """Read a parameter file (default: Table I), apply `section.key=value` overrides, validate."""
     path = Path(path) if path is not None else DEFAULT_PARAMS
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark (some Windows editors) is no statement
     except OSError as e:
         raise ParamError(f"{path}: cannot read parameter file ({e.strerror or e})") from None
     except UnicodeDecodeError:
@@ -472,12 +476,20 @@ def load_params(path: str | Path | None = None, overrides: list[str] | tuple[str
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ParamError(f"{path}: not valid TOML ({e})") from None
+    given = set()
     for o in overrides:
         section, key, value = _parse_override(o)
         if section not in SCHEMA or key not in SCHEMA[section]:
             raise ParamError(f"--set {section}.{key}: unknown key{_override_hint(section, key)}")
         raw.setdefault(section, {})[key] = value
-    return Params(validate(raw, source=str(path)), source=str(path))
+        given.add(f"{section}.{key}")
+    try:
+        return Params(validate(raw, source=str(path)), source=str(path))
+    except ParamError as e:  # a bad value the file holds is named with the file, as a bad key is
+        key = str(e).split(":", 1)[0].split(" = ", 1)[0]
+        if path != DEFAULT_PARAMS and key in _ALL_KEYS and key not in given:
+            raise ParamError(f"{path}: {e}") from None
+        raise
 
 
 def _did_you_mean(section: str, key: str) -> str:
@@ -502,6 +514,9 @@ def _override_hint(section: str, key: str) -> str:
         return f" (did you mean {close[0]}.{key}?)"
     elsewhere = [s for s, keys in SCHEMA.items() if key in keys]
     return f" (did you mean {elsewhere[0]}.{key}?)" if elsewhere else ""
+
+
+_ALL_KEYS = frozenset(f"{s}.{k}" for s, keys in SCHEMA.items() for k in keys)
 
 
 def validate(raw: dict, source: str = "parameters", plausible: bool = True) -> dict:

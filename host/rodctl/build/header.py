@@ -31,15 +31,17 @@ def regenerate_command(params_path: str | None, overrides: Sequence[str], header
 
 
 def _regenerate_key(line: str):
-    """A generated file's "Regenerate: rodctl gains ..." line without the paths of --params and --header: one command
-    however they were spelled or wherever it ran (my_rod.toml from /tmp/rig, /tmp/rig/my_rod.toml from elsewhere).
-    What the paths held is the inputs' SHA-256 beside it, and the header is the file being compared."""
+    """A generated file's "Regenerate: rodctl gains ..." line without --params and --header: one command however
+    their paths were spelled or wherever it ran (my_rod.toml from /tmp/rig, /tmp/rig/my_rod.toml from elsewhere, a
+    copy of the default file). What the file held is the inputs' SHA-256 beside it, and the header is the file
+    being compared."""
     _, _, command = line.partition("Regenerate: ")
     try:
         words = shlex.split(command)
     except ValueError:
         return line
-    return tuple("PATH" if i and words[i - 1] in ("--params", "--header") else w for i, w in enumerate(words))
+    paths_at = {i + 1 for i, w in enumerate(words) if w in ("--params", "--header")}
+    return tuple(w for i, w in enumerate(words) if i not in paths_at and w not in ("--params", "--header"))
 
 
 def _comparable(text: str) -> list:
