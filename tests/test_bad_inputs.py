@@ -137,6 +137,8 @@ def test_a_value_just_outside_the_plausible_range_gets_no_made_up_reading(overri
 
 @pytest.mark.parametrize("override, line", [
     ("rod.length=155", "rodctl: rod.length = 155 m is not a testbed's (plausible: 0.02 to 2 m): did you mean 0.155 m?"),
+    ("rod.thickness=0.6",  # a 0.6 mm strip typed in mm: the commonest slip first, not the reading nearest the middle
+     "rodctl: rod.thickness = 0.6 m is not a testbed's (plausible: 0.0005 to 0.1 m): did you mean 0.0006 m?"),
     ("rod.youngs_modulus=593",
      "rodctl: rod.youngs_modulus = 593 Pa is not a testbed's (plausible: 1000 to 2e+11 Pa): did you mean 593000 Pa?"),
     ("motor.gear_ratio=0.0204",

@@ -372,10 +372,10 @@ def test_a_still_rod_at_the_clips_ends_is_no_repeat_and_a_repeat_amid_motion_is(
     F = 12
     still = np.zeros((F, 9, 2)) + np.arange(9)[None, :, None] * 20.0
     moving = still + np.arange(F)[:, None, None] * 3.0  # 3 px a frame
-    moving[1] = moving[0]  # frame 1 shows frame 0 again
-    for pos, repeated in ((still, []), (moving, [1])):
+    moving[1], moving[F - 1] = moving[0], moving[F - 2]  # the first frame after and the last shown again
+    for pos, repeated in ((still, []), (moving, [1, F - 1])):
         quality, same = np.zeros(F, np.int8), np.zeros(F, bool)
-        same[1] = True
+        same[[1, F - 1]] = True
         flag_repeats(pos.copy(), quality, same)
         assert np.flatnonzero(quality == REPEATED).tolist() == repeated
 

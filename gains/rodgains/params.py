@@ -377,9 +377,9 @@ PLAUSIBLE: dict[str, tuple[float, float]] = {
 _UNIT_SLIPS = (1e-3, 1e3, 1e-2, 1e2, 1e-6, 1e6, 1e-1, 10.0)
 
 
-# A reading is offered only when it lands this many decades nearer the range's middle than the value typed: a unit
-# slip is a factor of 100 or 1000 away, a value just outside the range is a rig of its own ("0.015 m: did you mean
-# 1.5 m?" was no help).
+# A value just outside the plausible range is offered a reading only when it lands this many decades nearer the
+# range's middle: a unit slip is a factor of 100 or 1000 away, a value just outside the range is a rig of its own
+# ("0.015 m: did you mean 1.5 m?" was no help).
 SLIP_DECADES = 1.5
 
 
@@ -394,9 +394,12 @@ def _slip_guess(name: str, value: float, unitless: bool = False) -> float | None
     def off(v: float) -> float:  # decades from the middle
         return abs(math.log10(v / middle))
 
-    fits = [value * f for f in ((1e-3, 1e3) if unitless else _UNIT_SLIPS) if lo <= value * f <= hi]
-    best = min(fits, key=off, default=None)
-    return best if best is not None and off(value) - off(best) >= SLIP_DECADES else None
+    # Far outside the range (half a decade past its edge) the value is a slip: the commonest reading that fits, mm or
+    # kPa first (0.6 for a 0.6 mm strip is 0.0006 m, not 0.006). Just outside it, only a reading that lands
+    # SLIP_DECADES nearer the middle (593 Pa for 593 kPa; not 1.5 m for 0.015 m).
+    far = (math.log10(lo / value) if value < lo else math.log10(value / hi)) >= 0.5
+    return next((value * f for f in ((1e-3, 1e3) if unitless else _UNIT_SLIPS)
+                 if lo <= value * f <= hi and (far or off(value) - off(value * f) >= SLIP_DECADES)), None)
 
 
 def _implausible(name: str, unit: str, value: float) -> str | None:
@@ -531,8 +534,7 @@ def validate(raw: dict, source: str = "parameters", plausible: bool = True) -> d
             if key not in SCHEMA[section]:
                 raise ParamError(f"{source}: {section}.{key}: unknown key{_did_you_mean(section, key)}")
     if not raw:
-        raise ParamError(f"{source}: no parameters in it (every key is required: `rodctl params --out FILE` "
-                         "writes a complete file to edit)")
+        raise ParamError(f"{source}: no parameters in it (`rodctl params --out FILE` writes a complete file to edit)")
     out: dict[str, dict[str, Any]] = {}
     for section, keys in SCHEMA.items():
         out[section] = {}

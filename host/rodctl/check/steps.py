@@ -6,7 +6,6 @@ turning the rod counter-clockwise and a positive torque must both raise the coun
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from rodctl.check.model import planned_pulse

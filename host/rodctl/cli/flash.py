@@ -16,7 +16,7 @@ import sys
 import time
 from pathlib import Path
 
-from rodgains.atomic_file import write_changed
+from rodgains.atomic_file import atomic_write
 from rodgains.errors import UserError
 
 from rodctl import paths
@@ -35,11 +35,13 @@ def ensure_header(args, project: Path) -> None:
 
     print("checking the gains header against the parameters (designing) ...", file=sys.stderr, flush=True)
     t = time.monotonic()
-    header = project / paths.COMMITTED_HEADER.relative_to(paths.REPO)
+    header = project / "firmware" / "include" / "rod_gains.h"  # where platformio.ini's project builds it from
     d, files = gains_header.generated_files(args.params, args.overrides,
                                             None if header.resolve() == paths.COMMITTED_HEADER.resolve() else str(header),
                                             progress=robust_progress)
-    stale = write_changed(files)
+    stale = gains_header.stale(files)  # as `gains --check` judges it: a path spelled otherwise is no change
+    for f in stale:
+        atomic_write(f, files[f])
     if stale:
         shown = ", ".join(paths.shown(f) for f in stale)
         print(f"parameters changed: regenerated {shown} (N={d.N}, {1 / d.dt:g} Hz) in {time.monotonic() - t:.1f} s",

@@ -46,10 +46,9 @@ def run_plot(args) -> int:
         return run_scope(args)
     if not args.log:
         raise InputError("name a log to plot (rodctl plot run.csv), or --live --port PORT")
-    scope_only = [f"--{k.replace('_', '-')}" for k in ("port", "arm", "duration", "record", "format", "screenshot")
-                  if getattr(args, k, None) is not None]
-    if getattr(args, "window", 10.0) != 10.0:
-        scope_only.append("--window")
+    scope_only = [f"--{k.replace('_', '-')}" for k in ("port", "arm", "duration", "record", "format", "screenshot",
+                                                          "window", "params")
+                  if getattr(args, k, None) is not None] + (["--set"] if getattr(args, "overrides", None) else [])
     if scope_only:  # they were dropped without a word: a log's figure has no board to arm or time to wait
         raise InputError(f"{', '.join(scope_only)}: only with --live (the scope of a board), not for a log's figure")
     from rodctl.cli.outputs import check_output

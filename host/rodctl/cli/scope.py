@@ -19,13 +19,15 @@ import threading
 
 from rodgains.errors import InputError, UserError
 
+WINDOW_S = 10.0  # seconds of time series shown by default [s]
+
 
 def add_scope_args(p) -> None:
     from rodctl.cli.common import add_design_args, add_port_arg
     from rodctl.logs.writer import FORMATS
 
     add_port_arg(p)
-    p.add_argument("--window", type=float, default=10.0, metavar="S", help="seconds of time series shown (default 10)")
+    p.add_argument("--window", type=float, metavar="S", help="seconds of time series shown (default 10)")
     p.add_argument("--duration", type=float, metavar="S", help="close (and disarm) after S seconds")
     p.add_argument("--arm", choices=("swing-up", "balance"), help="arm right after connecting")
     p.add_argument("--record", metavar="PATH", help="record from the start to PATH (r toggles recording)")
@@ -45,6 +47,8 @@ def check_scope_args(args) -> None:
     from rodctl.cli.outputs import check_name, check_output
 
     check_duration(args.duration)
+    if args.window is None:
+        args.window = WINDOW_S
     if not (math.isfinite(args.window) and 0 < args.window <= 3600):
         raise InputError(f"--window {args.window:g}: must be in (0, 3600] s")
     if args.screenshot is not None:
@@ -86,7 +90,7 @@ def run_scope(args) -> int:
     check_scope_args(args)
     why = display_problem()
     if why is not None:
-        out = getattr(args, "record", None) or "run.csv"
+        out = getattr(args, "record", None) or f"run.{getattr(args, 'format', None) or 'csv'}"
         raise UserError(f"the scope needs a display: {why}. Record instead with `{log_instead(args, out)}`, then "
                         f"`rodctl plot {shlex.quote(out)} --out run.png`")
     from rodctl.scope.loop import close_scope, open_scope, run_window, shot_saved

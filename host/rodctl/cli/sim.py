@@ -180,18 +180,17 @@ def run_sim(args) -> int:
         expected = SCENARIOS[name].expect_pass
         fell = SCENARIOS[name].group == "testbed" and any(tr.fell for tr in o.traces)
         if (expected and not o.passed) or fell:  # the testbed's documented fail is a lean, never a fall
-            unexpected.append(name)
+            unexpected.append(f"{name} (the rod fell)" if fell else name)
         elif expected is False and o.passed:  # another rig's file, or a better design: good news, not an error
             print(f"  {name} passes, where the default rig's documented outcome is a fail (docs/scenarios.md)")
         elif expected is False and not fell and SCENARIOS[name].group == "testbed":
             print(f"  {name}: a documented fail on a rig with play (the rod held, off the 1 deg goal: "
-                  "docs/control.md); exit 0")
+                  "docs/control.md), not a failed run")
     if args.all and args.readme:
         replace_table(Path(args.readme), table_markdown(outcomes))
         print(f"updated the scenario table in {args.readme}")
     if unexpected:
-        print(f"rodctl sim: {', '.join(unexpected)} failed where it must pass (a testbed run must not fall)",
-              file=sys.stderr)
+        print(f"rodctl sim: {', '.join(unexpected)} failed where it must pass", file=sys.stderr)
         return 1
     return 0
 

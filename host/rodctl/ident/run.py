@@ -92,7 +92,8 @@ class RestWatch:
 
     def still(self, now: float, rate: float, count: int) -> bool:
         """now [s], rate [rad/s], count [counts]: True once the base has held still long enough."""
-        self._slow_since = (self._slow_since or now) if abs(rate) < REST_RATE_RAD_S else None
+        slow = abs(rate) < REST_RATE_RAD_S
+        self._slow_since = (now if self._slow_since is None else self._slow_since) if slow else None
         self._seen.append((now, int(count)))
         while len(self._seen) > 1 and now - self._seen[1][0] >= REST_HOLD_S:
             self._seen.pop(0)  # keep the oldest sample at least REST_HOLD_S back

@@ -212,8 +212,10 @@ def report_lines(d: Design) -> list[str]:
         lines.append(f"  {name:22s} spectral radius {rho:.6f}  {slow}  L/Lc {ratio:.3f}{flag}")
     nominal = next(c for c in corners if c.name == "nominal")
     if nominal.radius > 1.0:  # the rod itself, not a corner of the matrix: it falls
-        why = (f"the rod above the hub is {nominal.ratio:.2f} x its clamped buckling length, which feedback from the "
-               "motor's encoder alone does not hold here (docs/sensors.md: the tip IMU)" if nominal.ratio >= 1.0
+        sensed = ("this design with the tip IMU does not hold" if p["sensors"]["tip_imu"] else
+                  "feedback from the motor's encoder alone does not hold here (docs/sensors.md: the tip IMU)")
+        why = (f"the rod above the hub is {nominal.ratio:.2f} x its clamped buckling length, which {sensed}"
+               if nominal.ratio >= 1.0
                else "rodctl sim shows it fall; see the margins above")
         lines.append(f"  WARNING: the design does not hold the nominal rod even linearly: {why}")
     if in_range:

@@ -190,6 +190,7 @@ def _still_around(pos_px: np.ndarray, usable: np.ndarray) -> np.ndarray:
     both = usable[1:] & usable[:-1]
     step[1:][both] = _max_px(pos_px[1:][both] - pos_px[:-1][both])
     out[1:-1] = (step[1:-1] < STILL_PX) & (step[2:] < STILL_PX)
+    out[-1] = step[-1] < STILL_PX and step[-2] < STILL_PX  # the last frame has no frame after it: the two before
     return out
 
 
