@@ -487,8 +487,8 @@ def test_gains_with_an_empty_output_name_writes_nothing(option):
 @pytest.mark.parametrize("text, says", [
     ("[rod]\nlenght = 0.14\n", "{f}: rod.lenght: unknown key (did you mean rod.length?)"),
     ("[rod]\nbacklash_deg = 1.5\n", "{f}: rod.backlash_deg: unknown key (it belongs in [gearbox])"),
-    ("", "{f}: no parameters in it (every key is required: `rodctl params --out FILE` writes a complete file to edit)"),
-    ("# my rig\n", "{f}: no parameters in it (every key is required: `rodctl params --out FILE` writes a complete "
+    ("", "{f}: no parameters in it (`rodctl params --out FILE` writes a complete file to edit)"),
+    ("# my rig\n", "{f}: no parameters in it (`rodctl params --out FILE` writes a complete "
                    "file to edit)"),
 ])
 def test_a_parameter_file_that_is_empty_or_misspelled_is_named(tmp_path, text, says):
