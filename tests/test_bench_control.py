@@ -72,16 +72,18 @@ def test_control_goals_are_reported_with_verdicts_and_a_miss_exits_1(monkeypatch
     assert " ok " in lines["curved_own_design_within_4deg_s"] and "(goal <= 5 s)" in lines["curved_own_design_within_4deg_s"]
 
 
+def _never_settles(params, case, task, keep_log=False, **kw):
+    """A matrix run that is never caught and never settles, 5 deg off at its end."""
+    r = {"settle_s": None, "caught_at_s": None, "final_dev_deg": 5.0}
+    if keep_log:
+        r["log"] = {"time": np.arange(0.0, 12.0, 1e-3), "torque": np.zeros(12000)}
+    return r
+
+
 def test_control_quick_skips_the_matrix_and_the_longest_rod(monkeypatch):
     from rodctl.bench import control
 
-    def never(params, case, task, keep_log=False, **kw):
-        r = {"settle_s": None, "caught_at_s": None, "final_dev_deg": 5.0}
-        if keep_log:
-            r["log"] = {"time": np.arange(0.0, 12.0, 1e-3), "torque": np.zeros(12000)}
-        return r
-
-    monkeypatch.setattr(M, "run_case", never)
+    monkeypatch.setattr(M, "run_case", _never_settles)
     got = control.measure(quick=True)
     assert set(got) == {"nominal_balance_settle_s", "nominal_balance_final_deg", "nominal_swingup_catch_s",
                         "nominal_swingup_settle_s", "nominal_swingup_final_deg", "balanced_torque_rms_mNm",
@@ -93,13 +95,7 @@ def test_control_quick_skips_the_matrix_and_the_longest_rod(monkeypatch):
 def test_the_json_of_a_time_that_never_came_is_strict(monkeypatch, tmp_path, capsys):
     """A settle that never came was written as Infinity, which JSON.parse and jq refuse: it is null. The run says
     each stage as it starts (it was silent for two minutes)."""
-    def never(params, case, task, keep_log=False, **kw):
-        r = {"settle_s": None, "caught_at_s": None, "final_dev_deg": 5.0}
-        if keep_log:
-            r["log"] = {"time": np.arange(0.0, 12.0, 1e-3), "torque": np.zeros(12000)}
-        return r
-
-    monkeypatch.setattr(M, "run_case", never)
+    monkeypatch.setattr(M, "run_case", _never_settles)
     out = tmp_path / "bench.json"
     assert main(["bench", "--only", "control", "--quick", "--json", str(out)]) == 1
     text = out.read_text()
