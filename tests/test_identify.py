@@ -46,12 +46,12 @@ def test_a_record_starts_with_the_rod_hanging_as_far_as_the_play_lets_it(enc_deg
     """2 deg of play: the rod hangs straight down while the gap around the motor side reaches it, else
     it rests on the nearer flank; the motor side is where the encoder says."""
     plant = faithful_plant(load_params().with_overrides("gearbox.backlash_deg=2.0"), input_mode="duty")
-    F.set_start(plant, math.radians(enc_deg))
+    plant.start_hanging(math.radians(enc_deg))
     th, dth = plant.state()
     assert np.allclose(np.degrees(th), rod_deg, atol=1e-9) and not dth.any()
     assert math.degrees(plant.motor_state()[0]) == pytest.approx(enc_deg)
     out = faithful_plant(load_params().with_overrides('encoder.location="output"'), input_mode="duty")
-    F.set_start(out, math.radians(1.5))
+    out.start_hanging(math.radians(1.5))
     assert np.allclose(np.degrees(out.state()[0]), 1.5), "an output-shaft encoder reads the rod itself"
 
 

@@ -7,7 +7,7 @@ import os
 import uuid
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 
 @contextmanager
@@ -31,10 +31,19 @@ def atomic_write(path: str | Path, data: str | bytes) -> Path:
     return Path(path)
 
 
-def stale(files: dict[Path, str]) -> list[Path]:
+def stale(files: dict[Path, str], comparable: Callable[[str], object] | None = None) -> list[Path]:
     """Of generated files ({path: text}), those missing or not holding their text (as UTF-8: a file that is not
-    text is stale, not an error)."""
-    return [f for f, text in files.items() if not f.is_file() or f.read_bytes() != text.encode()]
+    text is stale, not an error). comparable(text): what of a text must match (default: all of it, byte for byte)."""
+    def held(f: Path, text: str) -> bool:
+        data = f.read_bytes()
+        if data == text.encode():
+            return True
+        try:
+            return comparable is not None and comparable(data.decode("utf-8")) == comparable(text)
+        except UnicodeDecodeError:
+            return False
+
+    return [f for f, text in files.items() if not f.is_file() or not held(f, text)]
 
 
 def write_changed(files: dict[Path, str]) -> list[Path]:

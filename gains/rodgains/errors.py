@@ -14,9 +14,14 @@ class InputError(UserError):
 
 
 class ParamError(UserError):
-    """A parameter file or --set override is wrong (unknown/missing key, type, value)."""
+    """A parameter file or --set override is wrong (unknown/missing key, type, value). key: the "section.key" whose
+    value is wrong, when one is (None: the file itself, or a key that does not exist)."""
 
     exit_code = 2
+
+    def __init__(self, message: str, key: str | None = None):
+        super().__init__(message)
+        self.key = key
 
 
 class DesignRefused(UserError):

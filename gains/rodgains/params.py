@@ -489,9 +489,8 @@ def load_params(path: str | Path | None = None, overrides: list[str] | tuple[str
     try:
         return Params(validate(raw, source=str(path)), source=str(path))
     except ParamError as e:  # a bad value the file holds is named with the file, as a bad key is
-        key = str(e).split(":", 1)[0].split(" = ", 1)[0]
-        if path != DEFAULT_PARAMS and key in _ALL_KEYS and key not in given:
-            raise ParamError(f"{path}: {e}") from None
+        if path != DEFAULT_PARAMS and e.key is not None and e.key not in given:
+            raise ParamError(f"{path}: {e}", key=e.key) from None
         raise
 
 
@@ -519,9 +518,6 @@ def _override_hint(section: str, key: str) -> str:
     return f" (did you mean {elsewhere[0]}.{key}?)" if elsewhere else ""
 
 
-_ALL_KEYS = frozenset(f"{s}.{k}" for s, keys in SCHEMA.items() for k in keys)
-
-
 def validate(raw: dict, source: str = "parameters", plausible: bool = True) -> dict:
     """The resolved parameters of a raw table; ParamError naming the key. plausible=False skips the guard against
     unit slips (PLAUSIBLE), for values derived from a checked file rather than typed (the matrix's scaled cases)."""
@@ -545,9 +541,12 @@ def validate(raw: dict, source: str = "parameters", plausible: bool = True) -> d
                     raise ParamError(f"{source}: {name}: missing key [{spec.unit}]")
                 out[section][key] = spec.default
                 continue
-            out[section][key] = _coerce(name, spec, raw[section][key], plausible)
+            try:
+                out[section][key] = _coerce(name, spec, raw[section][key], plausible)
+            except ParamError as e:
+                raise ParamError(str(e), key=name) from None
     for name, problem in _cross_checks(out):
-        raise ParamError(f"{name}: {problem}")
+        raise ParamError(f"{name}: {problem}", key=name)
     return out
 
 

@@ -12,6 +12,7 @@ import shlex
 from pathlib import Path
 from typing import Callable, Sequence
 
+from rodgains import atomic_file
 from rodgains.params import DEFAULT_PARAMS, Params, load_params
 
 from rodctl import paths
@@ -52,15 +53,7 @@ def stale(files: dict[Path, str]) -> list[Path]:
     """Of the generated files ({path: text}), those missing or not holding their text, the regenerate command's paths
     left out (`rodctl gains --check --params /tmp/rig/my_rod.toml` of a header made with --params my_rod.toml in
     /tmp/rig is current)."""
-    out = []
-    for f, text in files.items():
-        try:
-            now = f.read_bytes().decode("utf-8") if f.is_file() else None
-        except UnicodeDecodeError:
-            now = ""  # not text: stale
-        if now is None or (now != text and _comparable(now) != _comparable(text)):
-            out.append(f)
-    return out
+    return atomic_file.stale(files, _comparable)
 
 
 def params_copy_text(p: Params, command: str) -> str:

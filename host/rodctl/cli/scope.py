@@ -73,11 +73,10 @@ def log_instead(args, out: str) -> str:
         parts += ["--arm", g["arm"]]
     if g["duration"] is not None:
         parts += ["--duration", f"{g['duration']:g}"]
+    from rodctl.link.design import design_flags
+
     parts += ["--out", out] + (["--format", g["format"]] if g["format"] else []) + (["--force"] if g["force"] else [])
-    if getattr(args, "params", None):
-        parts += ["--params", args.params]
-    for o in getattr(args, "overrides", None) or ():
-        parts += ["--set", o]
+    parts += design_flags(args)
     return " ".join(p if p == "PORT" else shlex.quote(p) for p in parts)
 
 

@@ -15,12 +15,9 @@ from rodctl.cli.robustness import add_exec_args, add_score_args, check_score_arg
 
 def reproduce_command(args) -> str:
     """The command that reruns this search, spelled from the arguments (not from how they were typed)."""
-    parts = ["rodctl", "tune"]
-    if args.params:
-        parts += ["--params", args.params]
-    for o in args.overrides:
-        parts += ["--set", o]
-    parts += ["--cases", args.cases]
+    from rodctl.link.design import design_flags
+
+    parts = ["rodctl", "tune", *design_flags(args), "--cases", args.cases]
     for flag, v in (("--samples", args.samples), ("--seed", args.seed), ("--seconds", args.seconds),
                     ("--only", args.only)):
         if v is not None:

@@ -3,7 +3,7 @@
 Model: the plant the parameter file describes (sim.plant.faithful_plant: its [plant] table, Coulomb
 friction, hub), driven by the duty each logged period held (the firmware's own translation of its
 torque command, so the fit sees the driver, back-EMF and current limit as the rig did), started at
-rest at the first logged count (`set_start`). The residual is simulated minus measured theta_1 at
+rest at the first logged count (`Plant.start_hanging`). The residual is simulated minus measured theta_1 at
 every control period, in units of the encoder's quantization noise (one count / sqrt(12)).
 
 Where in its first count each record starts is one more unknown per record (`start_counts`): a
@@ -131,7 +131,7 @@ class Simulator:
 
         from rodctl.sim.plant import SimulationError, faithful_plant, run_closed_loop
 
-        plant = faithful_plant(params, input_mode="duty", at_rest=False)  # set_start puts each record's rod at rest
+        plant = faithful_plant(params, input_mode="duty", at_rest=False)  # each record's start puts its rod at rest
         cpr = float(params.counts_per_rev)
         zero = math.radians(params["encoder"]["zero_error_deg"])
         out = []
@@ -142,7 +142,10 @@ class Simulator:
         for i, (r, duty, torque) in enumerate(zip(self.records, self._duty, self._torque)):
             within = 0.0 if starts is None else float(starts[i])
             theta0 = 2 * math.pi * (r.count[0] + within) / cpr - zero
-            set_start(plant, theta0, rest)
+            # where the last experiment left the rig: most often the motor on a flank and the rod a few tenths of a
+            # degree off hanging; started at the encoder's angle instead, up to half the gap off its rest, and the
+            # fit tunes the friction to a swing the rig never made
+            plant.start_hanging(theta0, rest)
             plant.time = 0.0
             self._ctl.lib.rod_replay_load(duty.ctypes.data_as(fp), torque.ctypes.data_as(fp), len(duty),
                                           ctypes.c_float(r.period))
@@ -154,15 +157,6 @@ class Simulator:
                 th = np.full(len(duty), theta0 + 10.0)
             out.append(th)
         return out
-
-
-def set_start(plant, theta_enc: float, rest=None) -> None:
-    """The rig at rest with its encoder side at theta_enc [rad, zero removed] (Plant.start_hanging), the rod in its
-    hanging shape (`rest`: rodctl.sim.statics.hanging_shape's; None: straight). A record starts where the last experiment left the rig,
-    most often with the motor on a flank and the rod a few tenths of a degree off hanging; starting the rod at the
-    encoder's angle instead puts it up to half the gap off its rest, and the fit then tunes the friction to a swing
-    the rig never made."""
-    plant.start_hanging(theta_enc, rest)
 
 
 _REPLAY = None

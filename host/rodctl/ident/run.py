@@ -92,8 +92,10 @@ class RestWatch:
 
     def still(self, now: float, rate: float, count: int) -> bool:
         """now [s], rate [rad/s], count [counts]: True once the base has held still long enough."""
-        slow = abs(rate) < REST_RATE_RAD_S
-        self._slow_since = (now if self._slow_since is None else self._slow_since) if slow else None
+        if abs(rate) < REST_RATE_RAD_S:
+            self._slow_since = now if self._slow_since is None else self._slow_since
+        else:
+            self._slow_since = None
         self._seen.append((now, int(count)))
         while len(self._seen) > 1 and now - self._seen[1][0] >= REST_HOLD_S:
             self._seen.pop(0)  # keep the oldest sample at least REST_HOLD_S back
@@ -247,16 +249,17 @@ def run_experiments(session, exps, log_dir: Path, stamp: str, params, source: st
 
     logs = []
     settle = E.settle_move(params)
+    span = rest_span_counts(params)
     for i, exp in enumerate(exps, 1):
         for attempt in range(1, MAX_TRIES + 1):
             # the first record starts from the rod the user hung still; every later one from where
             # the last experiment left the rig, which the settle move brings back to rest
             first = i == 1 and attempt == 1
-            _wait_rest(session, say, log_dir=log_dir, span_counts=rest_span_counts(params))  # a stopped experiment leaves the rod swinging: the settle move starts from rest
+            _wait_rest(session, say, log_dir=log_dir, span_counts=span)  # a stopped experiment leaves the rod swinging: the settle move starts from rest
             confirm(f"[{i}/{len(exps)}] {exp.describe()}" + ("" if first else f"\n  before it, {settle.describe()}"))
             if not first:
                 _settle(session, settle, limits, source, log_dir, soft_limit=soft_limit, settle_s=settle_s,
-                        span_counts=rest_span_counts(params), say=say)
+                        span_counts=span, say=say)
             path = log_dir / f"identify-{stamp}-{exp.name}{'' if attempt == 1 else f'-{attempt}'}.csv"
             watch = SwingWatch(limits, soft_limit)
             path, last = run_experiment(session, exp, path, params, source, watch)

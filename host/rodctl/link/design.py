@@ -11,6 +11,12 @@ from typing import Callable
 from rodctl.link.session import Session, parse_assignment
 
 
+def design_flags(args) -> list[str]:
+    """The --params and --set words that name the design the user gave (unquoted), for a command to suggest."""
+    return ((["--params", args.params] if getattr(args, "params", None) else [])
+            + [w for o in getattr(args, "overrides", None) or () for w in ("--set", o)])
+
+
 def given_design(args) -> str | None:
     """How the user named a design with --params / --set, or None when they named none."""
     if args is None or not (getattr(args, "params", None) or getattr(args, "overrides", None)):
@@ -31,10 +37,8 @@ def design_mismatch(session: Session, args, source: str) -> str | None:
 
     header = bytes(session.hello.header_sha256).hex()[:12]
     runs = f"is the design of {source}" if source != "unknown" else "matches no parameter file this command knows"
-    flags = ([f"--params {shlex.quote(args.params)}"] if args.params else []) + \
-        [f"--set {shlex.quote(o)}" for o in args.overrides or ()]
     return (f"the board does not run the design of {given}: its header {header} {runs}, and that design runs "
-            f"(the log names it); to run yours: rodctl flash {' '.join(flags)}")
+            f"(the log names it); to run yours: rodctl flash {shlex.join(design_flags(args))}")
 
 
 def design_params(session: Session, args=None):
