@@ -196,6 +196,10 @@ def test_a_set_the_scenario_does_not_apply_is_said(tmp_path):
                        text=True)
     assert r.stderr.splitlines()[0] == ("rodctl: warning: robust-backlash2 sets or leaves out gearbox.backlash_deg "
                                         "(docs/scenarios.md): --set gearbox.backlash_deg=0 is not applied")
+    r = subprocess.run([sys.executable, "-m", "rodctl.cli", "sim", "--scenario", "fig3", "--edges", "10",
+                        "--duration", "0.2", "--no-log", "--no-plot"], capture_output=True, text=True)
+    assert r.stderr.splitlines()[0] == ("rodctl: warning: fig3 sets or leaves out plant.edges (docs/scenarios.md): "
+                                        "--edges 10 is not applied")  # named as typed, not as a --set
 
 
 def test_a_testbed_run_that_falls_exits_1_and_a_documented_lean_exits_0():
@@ -228,3 +232,24 @@ def test_a_rig_that_passes_a_documented_failure_is_told_so_and_exits_0(tmp_path)
                        capture_output=True, text=True, cwd=tmp_path)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "PASS:" in r.stdout and "swingup passes, where the default rig's documented outcome is a fail" in r.stdout
+
+
+@pytest.mark.parametrize("limit_bytes, refused", [(200_000, "the log"), (300_000, "the truth file beside it")])
+def test_a_sim_whose_files_the_disk_refuses_leaves_none_of_them(tmp_path, limit_bytes, refused):
+    """A write refused part way (a file-size limit, EFBIG, as a full FAT32 stick) left the figure and the log's
+    events file beside a log cut short: a run can be run again, so its files are all or nothing."""
+    import resource
+    import signal
+
+    def limit() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))  # the 1 s log ~290 kB, its truth ~340
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "rodctl.cli", "sim", "--scenario", "balance", "--duration", "1",
+                        "--plot", str(out / "p.png"), "--log", str(out / "l.csv")], capture_output=True, text=True,
+                       preexec_fn=limit)
+    assert r.returncode == 1, refused
+    assert r.stderr.splitlines()[-1] == (f"rodctl: the file reached the largest size its disk or the system allows: "
+                                         f"the run's files were not written ({out / 'p.png'}, {out / 'l.csv'}); "
+                                         "free space or choose another folder, and run it again")
+    assert list(out.iterdir()) == []

@@ -150,19 +150,20 @@ def run_sim(args) -> int:
         if name is not None:
             check_name(name, flag)  # an empty name is refused, not taken for the default sim-NAME one
     params = params_from_args(args)
-    shorthand = ([f'plant.model="{args.plant}"'] if args.plant is not None else []) + \
-        ([f"plant.edges={args.edges}"] if args.edges is not None else [])
+    shorthand = ({f'plant.model="{args.plant}"': f"--plant {args.plant}"} if args.plant is not None else {}) | \
+        ({f"plant.edges={args.edges}": f"--edges {args.edges}"} if args.edges is not None else {})
     if shorthand:  # --plant / --edges: the [plant] table's model and edges, checked like --set
         params = params.with_overrides(*shorthand)
+    typed = {o: f"--set {o}" for o in args.overrides} | shorthand  # each override as the user spelled it
     names = list(SCENARIOS) if args.all else [args.scenario or DEFAULT]
     for name in names:
         if name not in SCENARIOS:
             raise InputError(f"unknown scenario {name!r}; one of: {', '.join(SCENARIOS)} (rodctl sim --list)")
     for name in names:  # a --set the scenario sets itself would be recorded as applied, and is not
-        ignored = SCENARIOS[name].ignored(list(args.overrides) + shorthand)
+        ignored = SCENARIOS[name].ignored(list(typed))
         if ignored:
             print(f"rodctl: warning: {name} sets or leaves out {', '.join(o.split('=', 1)[0].strip() for o in ignored)} "
-                  f"(docs/scenarios.md): {' '.join('--set ' + o for o in ignored)} is not applied", file=sys.stderr)
+                  f"(docs/scenarios.md): {' '.join(typed[o] for o in ignored)} is not applied", file=sys.stderr)
     if any(SCENARIOS[n].group != "paper" for n in names):  # the faithful plant's: refused before a compile
         from rodctl.sim.plant import check_faithful
 

@@ -10,6 +10,7 @@ from typing import Callable
 
 import numpy as np
 
+from rodgains.errors import UserError
 from rodgains.params import Params
 
 
@@ -28,6 +29,7 @@ def check_new_log(log: Path) -> None:
 def write_log(o, trace, path: Path) -> tuple[Path, Path]:
     """The trace in the device log format (rodctl.logs.LogWriter), plus the true state beside it."""
     from rodctl import logs as logfile
+    from rodctl.logs.writer import LogWriteFailed, files_of
     from rodctl.link import protocol as P
 
     p = o.params
@@ -37,6 +39,7 @@ def write_log(o, trace, path: Path) -> tuple[Path, Path]:
                                       + ("" if firmware else "; state feedback, theta_hat is the true state") + ")")
     period_us = int(round(p.dt * 1e6))
     w = logfile.LogWriter(path, meta, n=n, overwrite=True)  # the caller has checked the log against --force
+    written = files_of(path)
     try:
         est = trace.est if firmware else np.hstack([trace.theta, np.zeros_like(trace.theta)])
         mode = trace.mode if trace.mode is not None else np.full(len(trace.t), 1)
@@ -52,13 +55,20 @@ def write_log(o, trace, path: Path) -> tuple[Path, Path]:
                               float(torque[k]), float(duty[k]), 0, 0, 0, 0,
                               tuple(est[k, :n].tolist()), tuple(est[k, n:].tolist()))
             w.write_telemetry(msg, seq=k, time_us=(k * period_us) & 0xFFFFFFFF, host_time_s=float(trace.t[k]))
-    finally:
         w.close()
-    truth = truth_name(path)
-    N = trace.theta.shape[1]
-    header = "time_s," + ",".join(f"theta_{i + 1}_rad" for i in range(N))
-    np.savetxt(truth, np.column_stack([trace.t, trace.theta]), delimiter=",", header=header, comments="",
-               fmt="%.9g")
+        truth = truth_name(path)
+        written.append(truth)
+        N = trace.theta.shape[1]
+        header = "time_s," + ",".join(f"theta_{i + 1}_rad" for i in range(N))
+        np.savetxt(truth, np.column_stack([trace.t, trace.theta]), delimiter=",", header=header, comments="",
+                   fmt="%.9g")
+    except BaseException as e:  # a run can be run again: its log is all or nothing, not a live log's first rows
+        w.discard()
+        for f in written:
+            f.unlink(missing_ok=True)
+        if isinstance(e, LogWriteFailed) and w.failure is not None:
+            raise w.failure from None  # the system's refusal, not the live log's "keeps its first rows"
+        raise
     return path, truth
 
 
@@ -92,11 +102,22 @@ def run_and_write(name: str, params: Params, *, plot: Path | None, log: Path | N
             for _, path in logs:
                 check_new_log(path)
     written = []
-    if plot is not None:
-        from rodctl.sim.figures import save
+    try:
+        if plot is not None:
+            from rodctl.sim.figures import save
 
-        save(o, plot)
-        written.append(str(plot))
-    for tr, path in logs:
-        written += [str(f) for f in write_log(o, tr, path)]
+            written.append(str(plot))
+            save(o, plot)
+        for tr, path in logs:
+            written += [str(f) for f in write_log(o, tr, path)]
+    except BaseException as e:  # all or nothing: no figure left beside a log that is not there
+        for f in written:
+            Path(f).unlink(missing_ok=True)
+        if isinstance(e, OSError):
+            from rodctl.logs.writer import refused_text
+
+            names = ([str(plot)] if plot is not None else []) + [str(path) for _, path in logs]
+            raise UserError(f"{refused_text(e)}: the run's files were not written ({', '.join(names)}); "
+                            "free space or choose another folder, and run it again") from None
+        raise
     return o, wall, written
