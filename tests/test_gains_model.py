@@ -5,7 +5,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from rodgains.buckling import (bessel_zero_minus_third, buckling_margins, clamped_ratio, greenhill_length,
-                               nlink_critical_length)
+                               nlink_critical_length, tip_mass_factor)
 from rodgains.der_model import DERModel
 from rodgains.linearize import linearize_upright, numerical_jacobian, paper_Ab, paper_Ag, paper_linearization
 from rodgains.params import load_params
@@ -107,6 +107,25 @@ def test_the_rod_above_the_hub_reaches_its_clamped_buckling_length_at_the_margin
         edge = p.with_overrides(f"rod.{key}={p['rod'][key] * (1 + m[key])!r}")
         assert clamped_ratio(edge) == pytest.approx(1.0, abs=1e-9), key
     assert clamped_ratio(p.with_overrides("rod.gravity=0.0")) == 0.0  # nothing buckles without weight
+
+
+def test_the_tip_imu_s_mass_shortens_the_clamped_buckling_length():
+    """2 g at the tip of Table I's 100 g rod: a point load far out weighs about three times its share, so the
+    rod above the hub goes from 0.941 to 0.960 x, and E -15 % (0.994 x bare) is past it. The margins bring the
+    ratio to 1 with the IMU on: E's alone scales the whole load; rho's and the length's are solved for."""
+    bare = load_params()
+    p = bare.with_overrides("sensors.tip_imu=true")
+    assert tip_mass_factor(bare) == 1.0
+    assert tip_mass_factor(p) == pytest.approx(1.0198, abs=2e-4)
+    assert clamped_ratio(p) == pytest.approx(0.9599, abs=2e-4)
+    assert clamped_ratio(p.with_overrides("rod.youngs_modulus=504050.0")) > 1.0 > \
+        clamped_ratio(bare.with_overrides("rod.youngs_modulus=504050.0"))
+    assert clamped_ratio(p.with_overrides("sensors.imu_mass=0.0")) == pytest.approx(clamped_ratio(bare), rel=1e-9)
+    m = buckling_margins(p)
+    assert (m["youngs_modulus"], m["density"], m["length"]) == pytest.approx((-0.116, 0.139, 0.040), abs=1e-3)
+    for key in ("youngs_modulus", "density", "length"):
+        edge = p.with_overrides(f"rod.{key}={p['rod'][key] * (1 + m[key])!r}")
+        assert clamped_ratio(edge) == pytest.approx(1.0, abs=1e-6), key
 
 
 def test_nlink_critical_length_converges_to_continuum():

@@ -223,6 +223,7 @@ class Design:
             "units": {"state": "rad, rad/s (theta = pi upright)", "input": "base torque at the output shaft [N m]", "dt": "s"},
             "closed_loop_spectral_radius": self.checks.get("closed_loop_spectral_radius"),
             "params_sha256": self.params.sha256(),
+            **({"imu": self.imu.to_json()} if self.imu is not None else {}),  # then L, L_disturbance: its encoder column
         }
 
 

@@ -131,6 +131,18 @@ class ImuEstimator:
 
     NY = 3
 
+    def to_json(self) -> dict:
+        """Every matrix of the IMU estimator, as the design's --json carries it (the class doc's equations)."""
+        d = self.delay
+        out = {"measurement": ["encoder theta_1 - upright [rad]", "gyro [rad/s]", "accelerometer normal [m/s^2]"],
+               "extra_state": ["encoder_offset [rad]", "gyro_bias [rad/s]"]
+               + [f"{name}_in_flight_{i} [{unit}]" for i in range(1, d + 1)
+                  for name, unit in (("gyro", "rad/s"), ("accel", "m/s^2"))],
+               "delay_periods": d}
+        for name in ("C_imu", "D_imu", "AZ", "AA", "BA", "CZ", "CA", "DY", "V", "L", "Lw", "La"):
+            out[name] = np.asarray(getattr(self, name)).tolist()
+        return out
+
     @property
     def NA(self) -> int:
         return 2 + 2 * self.delay

@@ -108,8 +108,9 @@ def _stiff_shaft_note(p, ratio: float) -> list[str]:
 def _clamped_line(p) -> str:
     """The rod above the plant's hub against its clamped buckling length, and what takes it there."""
     hub, ratio = p["plant"]["hub_length"], clamped_ratio(p)
-    head = (f"  above the plant's {hub * 1e3:g} mm hub: {(p['rod']['length'] - hub) * 100:.2f} cm = {ratio:.3f} x continuum, "
-            f"clamped at the hub")
+    imu = f" with the tip IMU's {p['sensors']['imu_mass'] * 1e3:g} g" if p["sensors"]["tip_imu"] else ""
+    head = (f"  above the plant's {hub * 1e3:g} mm hub: {(p['rod']['length'] - hub) * 100:.2f} cm = {ratio:.3f} x continuum"
+            f"{imu}, clamped at the hub")
     if ratio >= 1.0:
         return head + ": it buckles whenever the shaft holds still"
     if ratio == 0.0:

@@ -69,8 +69,9 @@ def measure(quick: bool = False, say=lambda text: None) -> dict[str, float]:
             say(f"{key}: the longest rod held")
             r = M.longest_balanced(q, band_deg=M.ROBUST_BAND_DEG, **how)
             out[key] = r["ratio"] if r["ratio"] is not None else 0.0
-        # issue 35: the Table I rod 15 % softer and 15 % denser (0.99 x its clamped buckling length) with the tip
-        # IMU and a design for that rod, as rodctl identify's file gives it: the larger end deviation of both tasks
+        # issue 35: the Table I rod 15 % softer and 15 % denser (1.013 and 1.003 x its clamped buckling length with the
+        # IMU's 2 g on its tip) with the tip IMU and a design for that rod, as rodctl identify's file gives it: the
+        # larger end deviation of both tasks
         for key, name in (("imu_own_design_e_minus15_final_deg", "E-15"), ("imu_own_design_rho_plus15_final_deg", "rho+15")):
             say(f"{key}: the tip IMU, {name} under its own design")
             runs = [M.run_case(imu, M.own_design(M.CASES[name]), task) for task in M.TASKS]

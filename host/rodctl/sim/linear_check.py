@@ -24,7 +24,7 @@ from rodgains.report import least_damped
 from rodgains.trim import STATICS_EDGES, blind, trim_gains
 
 from rodctl.sim import convergence, matrix
-from rodctl.sim.imu import linear_rows
+from rodctl.sim.imu import ImuConfig, linear_rows
 from rodctl.sim.plant import Plant, faithful_plant
 
 LINEAR_CASES = ("E+15", "E-15", "rho+15", "rho-15", "damping*0.1", "damping*10", "viscous*3", "J+30", "J-30",
@@ -174,7 +174,9 @@ def report_lines(d: Design) -> list[str]:
     per_plant = convergence.first_hanging_period(p, model, edges)
     per_lim, _ = convergence.richardson([convergence.first_hanging_period(p, model, n) for n in (10, 20, 40)],
                                         [10, 20, 40])
-    design_rod = Plant(p, edges=d.N, J=convergence.CLAMP_INERTIA, b=0.0)  # the paper's N-link model, held
+    # the paper's N-link model, held, with the tip IMU's mass as the design's model carries it
+    design_rod = Plant(p, edges=d.N, J=convergence.CLAMP_INERTIA, b=0.0,
+                       imu=ImuConfig.from_params(p) if p["sensors"]["tip_imu"] else None)
     A, _ = convergence.linearization(design_rod, upright=False)
     ev = np.linalg.eigvals(A)
     periods = 2 * np.pi / ev[ev.imag > 1e-9].imag
