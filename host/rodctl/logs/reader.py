@@ -237,11 +237,7 @@ def convert_log(src: str | Path, out: str | Path, fmt: str | None = None, overwr
     rows = log.data[want].tolist()
     ev = log.events.tolist()
     try:
-        with w._lock:
-            w.rows, w.events = len(rows), len(ev)
-            for k in range(0, len(rows), 50000):
-                w._sink.write_rows(rows[k:k + 50000])
-            w._sink.write_events(ev)
+        w.append_rows(rows, ev)
         w.close(log.trailer, verbatim=True)  # the recording's own counters and close time, or none: still cut short
     except (OSError, LogWriteFailed) as e:
         w.discard()

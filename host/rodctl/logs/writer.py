@@ -338,6 +338,21 @@ class LogWriter:
             left = f"nothing was kept of {self.path}"
         return f"{what}: {left}"
 
+    def append_rows(self, rows: list[tuple], events: list[tuple]) -> None:
+        """Write rows already in this log's column order and events (another log's, as log-convert copies them),
+        counted as received. LogWriteFailed when the system refuses a write."""
+        with self._lock:
+            if self.failure is not None:
+                raise LogWriteFailed(self._refused())
+            self.rows += len(rows)
+            self.events += len(events)
+            try:
+                for k in range(0, len(rows), 50000):  # a long log in slices: the sinks build each in memory
+                    self._sink.write_rows(rows[k:k + 50000])
+                self._sink.write_events(events)
+            except OSError as e:
+                self._failed(e)
+
     def discard(self) -> None:
         """Close and remove every file of this log (a copy that could not be finished: all or nothing)."""
         with self._lock:
