@@ -363,6 +363,19 @@ def test_console_session_from_a_script():
     assert "Traceback" not in r.stderr
 
 
+def test_the_console_takes_a_typo_as_a_typo_and_a_disarm_with_words_still_disarms():
+    """An unbalanced quote ended the session with an internal error; `status verbose` ran a bare status and `disarm
+    now please` dropped the words without a word."""
+    script = 'arm swing-up\nset "x\nstatus verbose\ndisarm now please\nstatus\nquit\n'
+    r = run_rodctl("console", "--port", "sim://", input=script, timeout=60)
+    assert r.returncode == 0 and "Traceback" not in r.stderr and "internal error" not in r.stderr, r.stderr
+    out = r.stdout
+    assert "error: no closing quotation" in out
+    assert "error: status takes nothing after it (got 'verbose'); 'help' lists commands" in out
+    assert "mode DISARMED (ignored: now please)" in out and "mode DISARMED (last: disarmed by the host)" in out
+    assert out.rstrip().endswith("disarmed and disconnected")
+
+
 def test_a_setting_refused_while_armed_says_to_disarm_first():
     script = "arm swing-up\nset encoder_sign=-1\ndisarm\nquit\n"
     r = run_rodctl("console", "--port", "sim://", input=script, timeout=60)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import signal
+import subprocess
 import time
 
 import numpy as np
@@ -187,6 +188,27 @@ def test_board_lost_mid_log_ends_with_one_line_and_a_closed_file(tmp_path):
     assert meta["end"] == "error" and "disconnected" in meta
     frame_events = np.count_nonzero(np.isin(log.events["event_name"], ["HELLO", "ACK"]))
     assert int(meta["frames"]) == len(data) + frame_events + int(meta["heartbeat_acks"])  # everything received
+
+
+def test_board_lost_under_the_console_is_said_once():
+    """The console printed the lost link twice, as its own `error:` and then as rodctl's last line."""
+    with sim_device() as (dev, pts):
+        con = start_rodctl("console", "--port", pts, stdin=subprocess.PIPE)
+        try:
+            con.stdin.write("status\n")
+            con.stdin.flush()
+            deadline = time.monotonic() + 60
+            while "mode DISARMED" not in con.stdout.readline():  # the console is up and the board answers
+                assert con.poll() is None and time.monotonic() < deadline, con.stderr.read()
+            dev.kill()  # the board vanishes (like pulling the USB cable)
+            dev.wait()
+            out, err = con.communicate("status\n", timeout=20)
+        finally:
+            if con.poll() is None:
+                con.kill()
+    assert con.returncode == 1
+    assert "device disconnected" not in out  # no `error:` line before rodctl's own
+    assert err.strip().splitlines()[-1].startswith(f"rodctl: {pts}: device disconnected") and "Traceback" not in err
 
 
 def _file_size_limit(limit_bytes: int):

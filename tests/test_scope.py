@@ -238,8 +238,10 @@ def test_each_key_does_what_the_window_says_and_no_dialog_opens(xdisplay, tmp_pa
     if shutil.which("xdotool") is None:
         pytest.fail("xdotool is not installed (bash .ci/run installs it)")
     env = rodctl_env(DISPLAY=xdisplay, MPLBACKEND=WINDOW_BACKEND)
-    proc = subprocess.Popen([*RODCTL, "scope", "--port", "sim://?theta0_deg=150", "--duration", "90"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+    shot = tmp_path / "at-q.png"  # the help: saved when the scope ends, q included
+    proc = subprocess.Popen([*RODCTL, "scope", "--port", "sim://?theta0_deg=150", "--duration", "90", "--screenshot",
+                             str(shot)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            cwd=tmp_path)
     said: list[str] = []
     lines: queue.Queue = queue.Queue()
     reader = threading.Thread(target=lambda: [lines.put(ln) for ln in proc.stderr], daemon=True)
@@ -274,7 +276,7 @@ def test_each_key_does_what_the_window_says_and_no_dialog_opens(xdisplay, tmp_pa
         press("d", "disarmed")
         press("b", "armed balance")
         press("space", "disarmed")
-        press("c", "fault cleared: DISARMED")
+        press("c", "no fault to clear: mode DISARMED")
         press("r", "recording to rod-")
         press("r", "recorded rod-")
         press("q", "quit")
@@ -289,3 +291,52 @@ def test_each_key_does_what_the_window_says_and_no_dialog_opens(xdisplay, tmp_pa
     assert proc.returncode == 0, said
     assert not any("Traceback" in ln for ln in said) and said[-1].startswith("scope ended: disarmed"), said
     assert len([f for f in tmp_path.glob("rod-*.csv") if not f.name.endswith(".events.csv")]) == 1
+    assert said[-1].rstrip().endswith(f"; screenshot {shot}") and shot.stat().st_size > 10_000, said
+
+
+@pytest.mark.parametrize("how", ["server killed", "window destroyed"])
+def test_a_lost_display_disarms_the_board_and_closes_the_recording(tmp_path, how):
+    """Xlib ends the process from C when its X server goes (an ssh -X session dropped) or an X error reaches its
+    default handler (the window destroyed under Tk): the scope died with the board armed until its watchdog, and
+    its recording cut short. Now the board is disarmed by the host and the recording closed, said in one line."""
+    from host_tools import run_rodctl, sim_device
+
+    from rodctl.logs import read_log
+    from rodctl.logs.reader import cut_short
+
+    xvfb = shutil.which("Xvfb")
+    if xvfb is None or shutil.which("xdotool") is None:
+        pytest.fail("Xvfb or xdotool is not installed (bash .ci/run installs them)")
+    r, w = os.pipe()
+    server = subprocess.Popen([xvfb, "-displayfd", str(w), "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
+                              pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(w)
+    rec = tmp_path / "run.csv"
+    try:
+        with os.fdopen(r) as f:
+            display = f":{f.readline().strip()}"
+        with sim_device() as (dev, pts):
+            proc = _start_scope(display, "--port", pts, "--arm", "swing-up", "--record", str(rec))
+            try:
+                _wait_for_window(proc)
+                assert proc.stderr.readline().startswith("scope: armed swing-up")  # the board's ack
+                time.sleep(1.0)  # a second of swing-up, recorded
+                if how == "server killed":
+                    server.kill()
+                else:
+                    subprocess.run(["xdotool", "search", "--name", "rodctl scope", "windowclose"], timeout=30,
+                                   env=rodctl_env(DISPLAY=display), capture_output=True)
+                _, err = proc.communicate(timeout=60)
+            finally:
+                if proc.poll() is None:
+                    proc.kill()
+                    proc.communicate()
+            status = run_rodctl("status", "--port", pts).stdout
+    finally:
+        server.kill()
+        server.wait(timeout=10)
+    assert proc.returncode == 1, err
+    assert err.strip().splitlines()[-1].endswith(f": disarmed; recorded {rec}"), err
+    assert err.strip().splitlines()[-1].startswith("rodctl: the scope's ") and "Traceback" not in err, err
+    assert "DISARMED (last: disarmed by the host)" in status, status  # not the watchdog's FAULT
+    assert cut_short(read_log(rec)) is None

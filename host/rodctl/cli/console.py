@@ -15,11 +15,13 @@ from rodctl.cli.common import (ARM_CHOICES, RateMeter, add_design_args, add_port
 from rodctl.cli.status import status_report
 from rodctl.link import protocol as P
 from rodctl.link.design import apply_settings
-from rodctl.link.session import CLEAR_FAULT, SETTINGS, Session, is_tty, name_of
+from rodctl.link.session import CLEAR_FAULT, SETTINGS, Session, cleared_text, is_tty, name_of
 from rodctl.logs.schema import from_upright_deg
 
 
 CLEAR = "type `clear`"  # the console's words for CLEAR_FAULT
+# commands that take nothing after them; disarm and quit act whatever follows (a word more must not keep a motor on)
+BARE_COMMANDS = ("help", "?", "clear", "clear-fault", "status")
 
 CONSOLE_HELP = """commands:
   arm swing-up | arm balance   arm the controller (disarmed again when the console closes)
@@ -83,13 +85,22 @@ def run_console(args) -> int:
                     break
                 if live is not None:
                     live.paused.set()
-                words = shlex.split(line, comments=True) if line.strip() else []
+                try:
+                    words = shlex.split(line, comments=True) if line.strip() else []
+                except ValueError as e:  # an unbalanced quote: a typo, not the end of the session
+                    print(f"error: {str(e)[0].lower()}{str(e)[1:]}")
+                    continue
                 if not words:
                     continue
                 cmd, rest = words[0].lower(), words[1:]
                 try:
                     s.check()
+                    if rest and cmd in BARE_COMMANDS:  # `disarm now` must not look like a command that did more
+                        raise UserError(f"{cmd} takes nothing after it (got {' '.join(rest)!r}); 'help' lists commands")
+                    ignored = f" (ignored: {' '.join(rest)})" if rest and cmd in ("disarm", "quit", "exit", "q") else ""
                     if cmd in ("quit", "exit", "q"):
+                        if ignored:
+                            print(ignored.strip())
                         break
                     elif cmd in ("help", "?"):
                         print(CONSOLE_HELP)
@@ -101,10 +112,10 @@ def run_console(args) -> int:
                         print(f"armed {key}: mode {name_of(P.Mode, ack.mode)}")
                     elif cmd == "disarm":
                         ack = s.disarm()
-                        print(f"mode {name_of(P.Mode, ack.mode)}")
+                        print(f"mode {name_of(P.Mode, ack.mode)}{ignored}")
                     elif cmd in ("clear", "clear-fault"):
-                        ack = s.clear_fault()
-                        print(f"mode {name_of(P.Mode, ack.mode)}")
+                        before = s.telemetry  # streaming: the board's mode a frame ago
+                        print(cleared_text(before, s.clear_fault()))
                     elif cmd == "set":
                         if not rest:
                             raise UserError(f"set NAME=VALUE (names: {', '.join(SETTINGS)})")
@@ -117,14 +128,13 @@ def run_console(args) -> int:
                               f"torque {r['torque_Nm']:.3g} N m; duty {r['duty']:.3g}")
                         print(f"settings: {st}")
                         print(f"firmware {r['firmware_version']}, N={r['n']}, {r['rate_hz']:g} Hz, parameters "
-                              f"{r['params_source']}; {status_text(s, 0).split(' | ', 2)[2]}")
+                              f"{r['params_source']}; {status_text(s, 0).split(' | ', 2)[2]}".replace(CLEAR_FAULT, CLEAR))
                     else:
                         raise UserError(f"unknown command {cmd!r}; 'help' lists them")
                 except UserError as e:
-                    msg = str(e).replace(CLEAR_FAULT, CLEAR)
-                    print(f"error: {msg}")
-                    if not s.alive:
+                    if not s.alive:  # the board is gone: said once, as rodctl's last line
                         raise UserError(str(e)) from None
+                    print(f"error: {str(e).replace(CLEAR_FAULT, CLEAR)}")
         except KeyboardInterrupt:
             print()
         finally:

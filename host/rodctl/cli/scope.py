@@ -108,6 +108,25 @@ def run_scope(args) -> int:
         for sig in (signal.SIGINT, signal.SIGTERM):
             old[sig] = signal.signal(sig, request_stop)
         scope = None
+
+        def display_lost(why: str) -> None:  # Xlib ends the process after this: no finally below runs
+            kept = ""
+            try:
+                if scope is not None:
+                    scope.finish()  # the recording closed; no figure call: the display is gone
+                    kept = f"; recorded {', '.join(scope.recorded)}" if scope.recorded else ""
+            except Exception:  # noqa: BLE001 - the disarm below matters more
+                pass
+            try:
+                s.close()  # DISARM, and its acknowledgement
+            except Exception:  # noqa: BLE001 - then the watchdog disarms, as said
+                pass
+            state = "disarmed" if s.disarm_acked else "disarm not confirmed (the watchdog disarms)"
+            print(f"rodctl: {why}: {state}{kept}", file=sys.stderr, flush=True)
+
+        from rodctl.scope import display_guard
+
+        display_guard.install(display_lost)
         try:
             scope = open_scope(s, args, say=say)
             if args.record:

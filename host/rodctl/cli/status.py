@@ -7,8 +7,8 @@ import json
 from rodctl.cli.common import add_design_args, add_port_arg, session_for, stop_signals
 from rodctl.link import protocol as P
 from rodctl.link.design import apply_settings, design_params
-from rodctl.link.session import (SETTINGS, Session, fault_text, hello_settings, mode_text, name_of,
-                                 parse_assignment, reason_text, rig_source)
+from rodctl.link.session import (SETTINGS, Session, cleared_text, fault_text, hello_settings, mode_text, name_of,
+                                 parse_assignment, rig_source)
 from rodctl.logs.schema import from_upright_deg
 
 
@@ -87,11 +87,7 @@ def run_disarm(args) -> int:
 def run_clear_fault(args) -> int:
     with stop_signals(), session_for(args) as s:
         before = s.wait_telemetry(timeout=2.0)
-        ack = s.clear_fault()
-        if before.mode == P.Mode.FAULT:
-            print(f"fault cleared ({reason_text(before.reason)}): mode {name_of(P.Mode, ack.mode)}")
-        else:
-            print(f"no fault to clear: mode {name_of(P.Mode, ack.mode)}")
+        print(cleared_text(before, s.clear_fault()))
     return 0
 
 

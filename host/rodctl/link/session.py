@@ -91,6 +91,15 @@ def fault_text(reason) -> str:
     return f"device is in {mode_text(P.Mode.FAULT, reason)}"
 
 
+def cleared_text(before, ack) -> str:
+    """What a CLEAR_FAULT did, as every tool says it: the fault it cleared (from `before`, the telemetry or hello
+    just before it), or that there was none; then the mode after (`ack`)."""
+    after = name_of(P.Mode, ack.mode)
+    if before is not None and int(before.mode) == P.Mode.FAULT:
+        return f"fault cleared ({reason_text(before.reason)}): mode {after}"
+    return f"no fault to clear: mode {after}"
+
+
 def mode_text(mode, reason, clear: str = CLEAR_FAULT) -> str:
     """The mode in words; a FAULT with its reason and what leaves it (`clear`: how this tool says clear-fault)."""
     m = name_of(P.Mode, mode)

@@ -72,22 +72,26 @@ def run_window(scope: Scope, stop: threading.Event, *, duration_s: float | None,
     ending = {"since": None}
     to_arm = [arm] if arm else []
 
+    def save_shot(*_event) -> None:
+        """The screenshot, once, saved or not: before the window closes, what it showed last."""
+        if screenshot and not shot["tried"]:
+            shot["tried"] = True
+            try:
+                fig.savefig(screenshot, dpi=100)
+            except Exception as e:  # noqa: BLE001 - said after the disarm
+                failures.append(UserError(f"--screenshot {screenshot}: not saved: {getattr(e, 'strerror', None) or e}"))
+
     def tick():
         # Nothing may escape: an exception in a GUI callback is printed and the loop goes on, with the
         # heartbeat keeping the board armed. Any failure ends the scope (the session then disarms).
         try:
             if to_arm and not stop.is_set():
                 scope.action(to_arm.pop())
-            if stop.is_set() or (t_end is not None and time.monotonic() >= t_end):
+            # q or a lost link (stop_requested), Ctrl-C (stop) or --duration
+            if stop.is_set() or scope.stop_requested or (t_end is not None and time.monotonic() >= t_end):
                 if ending["since"] is None:
                     ending["since"] = time.monotonic()
-                if screenshot and not shot["tried"]:  # before the window closes: what it showed last
-                    shot["tried"] = True  # once, saved or not
-                    try:
-                        fig.savefig(screenshot, dpi=100)
-                    except Exception as e:  # noqa: BLE001 - said after the disarm
-                        failures.append(UserError(f"--screenshot {screenshot}: not saved: "
-                                                  f"{getattr(e, 'strerror', None) or e}"))
+                save_shot()
                 scope.stop_requested = True
             scope.update()
         except Exception as e:  # noqa: BLE001 - said after the disarm
@@ -102,6 +106,7 @@ def run_window(scope: Scope, stop: threading.Event, *, duration_s: float | None,
         if ending["since"] is not None and time.monotonic() - ending["since"] > END_GRACE_S:
             _quit_window_loop(fig)
 
+    fig.canvas.mpl_connect("close_event", save_shot)  # the window closed by its title bar: no tick comes after
     timer = fig.canvas.new_timer(interval=100)
     timer.add_callback(tick)
     timer.start()

@@ -149,7 +149,7 @@ class Scope:
 
     # --- actions ----------------------------------------------------------------------------
     def action(self, name: str, text: str = "") -> None:
-        from rodctl.link.session import name_of
+        from rodctl.link.session import cleared_text
 
         s = self.s
         try:
@@ -162,8 +162,8 @@ class Scope:
                 s.disarm()
                 self.message = "disarmed"
             elif name == "clear":
-                ack = s.clear_fault()
-                self.message = f"fault cleared: {name_of(P.Mode, ack.mode)}"
+                before = s.telemetry  # streaming: the board's mode a frame ago
+                self.message = cleared_text(before, s.clear_fault())
             elif name == "record":
                 self.toggle_recording()
             elif name == "set":
