@@ -21,6 +21,19 @@ def test_set_on_a_device_command_configures_the_virtual_board():
     assert st["params_source"].endswith("--set rod.length=0.14 (sim://)") or "rod.length=0.14" in st["params_source"]
 
 
+def test_status_json_gives_settings_as_set_with_their_units():
+    """The settings were the board's f32 made double (swing_angle_deg 180.00000500895632) with no unit beside
+    swing_amplitude or heartbeat_timeout."""
+    st = json.loads(run_rodctl("status", "--port", "sim://", "--json").stdout)
+    assert st["settings"]["swing_angle_deg"] == 180.0 and st["settings"]["catch_angle_deg"] == 32.0
+    assert st["settings"]["swing_amplitude"] == 0.05 and st["torque_max_Nm"] == 0.2
+    assert st["settings_units"] == {"swing_amplitude": "N m", "swing_angle_deg": "deg", "catch_angle_deg": "deg",
+                                    "telemetry_decimation": "1", "heartbeat_timeout": "s", "encoder_sign": "1",
+                                    "motor_sign": "1", "counts_per_rev": "counts/turn"}
+    text = run_rodctl("status", "--port", "sim://").stdout
+    assert "swing_angle_deg 180 deg, catch_angle_deg 32 deg," in text
+
+
 def test_a_log_and_its_plot_carry_the_overrides(tmp_path):
     out = tmp_path / "short.csv"
     r = run_rodctl("log", "--port", "sim://?theta0_deg=180", "--set", "rod.length=0.14", "--duration", "0.5",

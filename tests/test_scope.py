@@ -159,7 +159,7 @@ def test_the_headless_scopes_suggestion_keeps_what_the_user_asked_for(tmp_path):
                         "--set", "rod.length=0.14"], capture_output=True, text=True, env=rodctl_env(), timeout=60)
     assert r.returncode == 1 and not rec.exists()
     assert (f"`rodctl log --port sim:// --arm swing-up --duration 2 --out {rec} --set rod.length=0.14`, then "
-            f"`rodctl plot {rec} --out run.png`") in r.stderr
+            f"`rodctl plot {rec} --out {tmp_path / 'r.png'}`") in r.stderr  # the figure named after the log
     parquet = subprocess.run([*RODCTL, "scope", "--port", "sim://", "--format", "parquet"], capture_output=True,
                              text=True, env=rodctl_env(), timeout=60)  # the name follows the format it names
     assert "--out run.parquet --format parquet`, then `rodctl plot run.parquet --out run.png`" in parquet.stderr

@@ -18,7 +18,8 @@ def run_log_convert(args) -> int:
     out = Path(args.out) if args.out else src.with_suffix("." + fmt)
     check_output(out, "--out", make_parent=True)  # before reading the log: the folder can be written
     convert_log(src, out, fmt=fmt, overwrite=args.force,
-                warn=lambda line: print(f"warning: {line}", file=sys.stderr))
+                warn=lambda line: print(f"warning: {line}", file=sys.stderr),
+                say=lambda line: print(f"{line} ...", file=sys.stderr, flush=True))
     print(f"wrote {out}")
     return 0
 

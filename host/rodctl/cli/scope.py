@@ -16,6 +16,7 @@ import shlex
 import signal
 import sys
 import threading
+from pathlib import Path
 
 from rodgains.errors import InputError, UserError
 
@@ -91,7 +92,7 @@ def run_scope(args) -> int:
     if why is not None:
         out = getattr(args, "record", None) or f"run.{getattr(args, 'format', None) or 'csv'}"
         raise UserError(f"the scope needs a display: {why}. Record instead with `{log_instead(args, out)}`, then "
-                        f"`rodctl plot {shlex.quote(out)} --out run.png`")
+                        f"`rodctl plot {shlex.quote(out)} --out {shlex.quote(str(Path(out).with_suffix('.png')))}`")
     from rodctl.scope.loop import close_scope, open_scope, run_window, shot_saved
 
     stop = threading.Event()

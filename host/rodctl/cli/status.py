@@ -26,9 +26,11 @@ def status_report(session: Session, args=None) -> dict:
         "n": h.n,
         "rate_hz": 1e6 / h.period_us,
         "decimation": h.decimation,
-        "settings": hello_settings(h),
+        # the board's f32 to its 7 digits: 180 deg, not the 180.00000500895632 its radians make
+        "settings": {k: None if v != v else float(f"{v:.7g}") for k, v in hello_settings(h).items()},  # NaN: unknown
+        "settings_units": {k: SETTINGS[k].unit or "1" for k in SETTINGS},
         "signs_from": rig_source(h),
-        "torque_max_Nm": h.torque_max,
+        "torque_max_Nm": float(f"{h.torque_max:.7g}"),
         "mode": name_of(P.Mode, t.mode),
         "reason": name_of(P.Reason, t.reason),
         "flags": [f.name for f in P.TelemetryFlag if int(t.flags) & int(f)],
@@ -57,8 +59,8 @@ def run_status(args) -> int:
     print(f"gains       N={r['n']} at {r['rate_hz']:g} Hz, header sha256 {r['header_sha256'][:16]}..., "
           f"parameters {r['params_source']}")
     print(f"mode        {mode}; flags {', '.join(r['flags']) or 'none'}")
-    print(f"settings    swing_amplitude {st['swing_amplitude']:.4g} N m, swing_angle_deg {st['swing_angle_deg']:.4g}, "
-          f"catch_angle_deg {st['catch_angle_deg']:.4g}, telemetry_decimation {st['telemetry_decimation']:g}, "
+    print(f"settings    swing_amplitude {st['swing_amplitude']:.4g} N m, swing_angle_deg {st['swing_angle_deg']:.4g} deg, "
+          f"catch_angle_deg {st['catch_angle_deg']:.4g} deg, telemetry_decimation {st['telemetry_decimation']:g}, "
           f"heartbeat_timeout {st['heartbeat_timeout']:.3g} s (torque max {r['torque_max_Nm']:.3g} N m)")
     print(f"wiring      {rig_text(st)} ({r['signs_from']})")
     th = ", ".join(f"{from_upright_deg(x):+.1f}" for x in r["theta_hat_rad"])
@@ -111,11 +113,19 @@ def register(sub) -> None:
     p.add_argument("--json", action="store_true", help="print as JSON")
     p.set_defaults(func=run_status)
 
-    p = sub.add_parser("disarm", help="turn the motor driver off (DISARMED, reason HOST)")
+    p = sub.add_parser("disarm", help="turn the motor driver off (DISARMED, reason HOST)",
+                       description="Send DISARM and wait for the board's acknowledgement: the driver off, the mode "
+                                   "DISARMED with reason HOST. A board in FAULT stays there (its driver already off): "
+                                   "rodctl clear-fault leaves it.")
     add_port_arg(p)
     p.set_defaults(func=run_disarm)
 
-    p = sub.add_parser("clear-fault", help="leave FAULT for DISARMED")
+    p = sub.add_parser("clear-fault", help="leave FAULT for DISARMED",
+                       description="Send CLEAR_FAULT: a board in FAULT goes to DISARMED (the driver stays off) and "
+                                   "says which fault it cleared; one that is not in FAULT says so. Three are held until "
+                                   "the board restarts: no control timer, an upload under way, and a restart by its "
+                                   "watchdog (the encoder's zero is then wherever the rod was: power it off and on "
+                                   "with the rod hanging).")
     add_port_arg(p)
     p.set_defaults(func=run_clear_fault)
 

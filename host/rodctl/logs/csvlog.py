@@ -47,9 +47,9 @@ def _fmt(kind: str, name: str):
 
 def _float_cell(v) -> str:
     """9 significant digits (round-trips an f32), and always a float's spelling: a column that is 0 all run (an idle
-    log's torque and duty) is read as floats by pandas and polars, not as integers."""
+    log's torque and duty) is read as floats by pandas and polars, not as integers, and so is one that is NaN all run."""
     if math.isnan(v):
-        return ""
+        return "NaN"  # not empty: a column empty all run (the IMU's, without one) is read as text by polars
     s = f"{float(v):.9g}"
     return s if any(ch in s for ch in ".eEn") else s + ".0"
 
@@ -223,6 +223,9 @@ def read(path: Path, names: list[str] | None):
                  else pa.float64()) for c in want}
     src, cut = _source(path)
     table, bad = _csv_table(path, src, types, include=want)
+    for i, name in enumerate(table.column_names):  # a cell's 9 digits name an f32: the same value Parquet and MCAP hold
+        if schema.is_device_f32(name):
+            table = table.set_column(i, name, table.column(i).cast(pa.float32()).cast(pa.float64()))
     meta["incomplete_rows"] = str(bad + int(cut))
     events = None
     ev = events_path(path)

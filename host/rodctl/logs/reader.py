@@ -20,7 +20,7 @@ import numpy as np
 from rodgains.errors import InputError
 
 from rodctl.logs import csvlog, mcaplog, parquetlog, schema
-from rodctl.logs.writer import EXTENSIONS, LogWriteFailed, LogWriter, refused_text
+from rodctl.logs.writer import EXTENSIONS, LogWriteFailed, LogWriter, files_of, refused_text
 
 
 class Log(tuple):
@@ -212,13 +212,27 @@ def cut_short(log: "Log") -> str | None:
     return f"{log.path}: cut short ({'; '.join(why)}); {len(data)} telemetry frames readable"
 
 
+LARGE_LOG_BYTES = 8 << 20  # a log this large takes seconds to read: plot and log-convert say so first
+
+
 def convert_log(src: str | Path, out: str | Path, fmt: str | None = None, overwrite: bool = False,
-                warn=None) -> Path:
+                warn=None, say=None) -> Path:
     """Write the log `src` (any format) as `out` (format from fmt or out's extension); returns out.
-    warn(line) is told when `src` was cut short (cut_short): the copy holds only what was readable."""
+    warn(line) is told when `src` was cut short (cut_short): the copy holds only what was readable. say(line): the
+    stages of a large log's copy, reading and writing."""
     src, out = Path(src), Path(out)
     if src.resolve() == out.resolve():
         raise InputError(f"{out} is the log being converted; choose another --out")
+    try:
+        theirs = {f.resolve() for f in files_of(src) if f.exists()}
+    except InputError:  # a log whose extension is not a format's (read by its content): a file alone
+        theirs = {src.resolve()}
+    for f in files_of(out, fmt):
+        if f.resolve() in theirs:  # --force would replace the source's own sidecar or events
+            raise InputError(f"{out}: its copy would write {f}, a file of the log being converted; choose another --out")
+    big = say is not None and src.is_file() and src.stat().st_size >= LARGE_LOG_BYTES
+    if big:
+        say(f"reading {src} ({src.stat().st_size / 1e6:.0f} MB)")
     log = read_log(src)
     short = cut_short(log)
     if short and warn is not None:
@@ -234,6 +248,8 @@ def convert_log(src: str | Path, out: str | Path, fmt: str | None = None, overwr
     if missing:  # before the writer makes its files: a refused log leaves none behind
         raise InputError(f"{src}: no column {missing[0]}; cannot convert")
     w = LogWriter(out, meta, n=n, fmt=fmt, overwrite=overwrite)
+    if big:
+        say(f"writing {out} ({len(log.data):,} rows)")
     rows = log.data[want].tolist()
     ev = log.events.tolist()
     try:

@@ -84,6 +84,11 @@ def dtype_of(name: str) -> str:
     return "f8"
 
 
+def is_device_f32(name: str) -> bool:
+    """A telemetry column whose values are the device's f32 (every f8 column but the two clocks)."""
+    return dtype_of(name) == "f8" and not name.endswith("time_s")
+
+
 def units(n: int) -> dict[str, dict[str, str]]:
     """{column: {"unit", "meaning"}}, as written to the sidecar, the Parquet schema and the MCAP schema."""
     return {name: {"unit": unit, "meaning": what} for name, _, unit, what in columns(n)}

@@ -28,6 +28,12 @@ FLUSH_INTERVAL_S = {"csv": 0.25, "parquet": 5.0, "mcap": 0.25}
 _NAN = float("nan")
 
 
+def _host_us(host_time_s: float) -> float:
+    """The host's receive time to the microsecond [s], as a CSV cell spells it: every format then holds the same
+    value (a USB batch's arrival is known to far less)."""
+    return round(float(host_time_s), 6)
+
+
 EXTENSIONS = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet", ".mcap": "mcap"}
 
 
@@ -54,8 +60,8 @@ def log_format(path: str | Path, fmt: str | None = None) -> str:
     if not ext:
         return fmt or "csv"
     if ext not in EXTENSIONS:
-        raise InputError(f"{path}: a log is .csv, .parquet or .mcap, not {ext} (pandas and spreadsheets read all "
-                         "three: rodctl log-convert)")
+        raise InputError(f"{path}: a log is .csv, .parquet or .mcap, not {ext} (a spreadsheet opens the .csv; "
+                         "rodctl log-convert turns one into another)")
     if fmt and EXTENSIONS[ext] != fmt:
         raise InputError(f"{path}: --format {fmt} but the name says {EXTENSIONS[ext]}; name it .{fmt} or drop --format")
     return EXTENSIONS[ext]
@@ -186,7 +192,7 @@ class LogWriter:
             t = self.clock(time_us)
             if self.failure is not None:
                 return
-            row = (t, float(host_time_s), int(seq), int(time_us), mode, _name(_MODE_NAMES, mode), reason,
+            row = (t, _host_us(host_time_s), int(seq), int(time_us), mode, _name(_MODE_NAMES, mode), reason,
                    _name(_REASON_NAMES, reason), int(msg.flags), int(msg.encoder_count), float(msg.base_rate),
                    float(msg.torque), float(msg.duty), int(msg.step_us), int(msg.overruns),
                    int(msg.frames_dropped), int(msg.rx_errors)) + th + rt
@@ -210,7 +216,7 @@ class LogWriter:
     def _event_locked(self, t, host_time_s, seq, kind, mode, reason, info) -> None:
         if self.failure is not None:
             return
-        self._ebuf.append((t, float(host_time_s), int(seq), kind, int(mode), _name(_MODE_NAMES, mode),
+        self._ebuf.append((t, _host_us(host_time_s), int(seq), kind, int(mode), _name(_MODE_NAMES, mode),
                            -1 if reason is None else int(reason),
                            "" if reason is None else _name(_REASON_NAMES, reason), info))
         self.events += 1

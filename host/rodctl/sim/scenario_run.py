@@ -47,6 +47,8 @@ def write_log(o, trace, path: Path) -> tuple[Path, Path]:
         count = trace.count if trace.count is not None else np.zeros(len(trace.t), int)
         # the firmware's command, as a board's telemetry carries it (the torque the rod received is the metrics')
         torque = trace.torque_cmd if trace.torque_cmd is not None else trace.torque
+        # the board's f32, as its telemetry carries them: every log format then holds the same values
+        est, duty, torque = (np.asarray(a, np.float32).astype(float) for a in (est, duty, torque))
         for k in range(len(trace.t)):
             m = int(mode[k])
             reason = trace.reason if m == 3 else 0
