@@ -555,6 +555,13 @@ def test_a_generated_header_is_regenerated_and_force_replaces_a_users_file(tmp_p
      "rodctl: --root {missing}: no protocol definition at {missing}/firmware/protocol/rodlink.toml"),
     (["sweep", "--grid", "rod.length=0.1:0.2:1e-9", "--out", "s.parquet"],
      "rodctl: --grid rod.length=0.1:0.2:1e-9: 100,000,001 points on one axis (at most 1,000,000); use a larger step"),
+    # the JSON was dropped without a word (--check), or written over by the header's own file
+    (["gains", "--check", "--json", "d.json"], "rodctl: --check writes nothing; drop --json, or write the design "
+                                                "without --check"),
+    (["gains", "--header", "j.h", "--json", "j.h", "--force"], "rodctl: --json j.h: --header j.h writes that file "
+                                                                "too; name another"),
+    (["gains", "--header", "j.h", "--json", "j.toml"], "rodctl: --json j.toml: --header j.h writes that file too; "
+                                                        "name another"),
 ])
 def test_more_bad_input_is_exit_2(tmp_path, argv, line):
     missing = str(tmp_path / "missing")  # never made (the folder is checked empty below): absent on any machine

@@ -102,6 +102,7 @@ def test_missing_environment_is_one_line(tmp_path, monkeypatch, capsys):
     (["--set", "rod.bogus=1"], "rodctl: --set rod.bogus: unknown key"),
     (["--set", "gearbox.backlash_deg=-1"], "rodctl: gearbox.backlash_deg: must be between 0 and 10"),
     (["--project-dir", "{missing}"], "rodctl: --project-dir {missing}: no platformio.ini there"),
+    (["--project-dir", ""], "rodctl: --project-dir: empty folder name"),  # built this checkout, its header rewritten
 ])
 @pytest.mark.parametrize("command", [["build"], ["flash", "--upload-port", "/dev/ttyACM0"]])
 def test_bad_input_is_named_before_looking_for_platformio(no_pio, capsys, tmp_path, command, argv, line):
@@ -111,6 +112,32 @@ def test_bad_input_is_named_before_looking_for_platformio(no_pio, capsys, tmp_pa
     assert cli.main([*command, *(a.replace("{missing}", missing) for a in argv)]) == 2
     assert _one_line(capsys).startswith(line.replace("{missing}", missing))
     assert paths.COMMITTED_HEADER.read_bytes() == header
+
+
+@pytest.mark.parametrize("port, line", [
+    ("sim://", "rodctl: --port sim://: flash uploads to a Teensy on USB; the virtual board (sim://) needs no firmware"),
+    ("/dev/ttyFAKE", "rodctl: --port /dev/ttyFAKE: no such serial port"),
+])
+def test_flash_to_a_port_that_takes_no_firmware_is_refused_before_the_header(no_pio, capsys, port, line):
+    """`flash --port sim://` (which flash's own error suggested) regenerated the committed header for its --set, then
+    ran PlatformIO against sim:// for a minute."""
+    header = paths.COMMITTED_HEADER.read_bytes()
+    assert cli.main(["flash", "--port", port, "--set", "rod.length=0.16"]) == 2
+    assert _one_line(capsys).startswith(line)
+    assert paths.COMMITTED_HEADER.read_bytes() == header
+
+
+@pytest.mark.parametrize("command", [["build"], ["flash", "--upload-port", "/dev/ttyACM0"]])
+def test_a_hand_written_project_header_is_kept_without_force(no_pio, capsys, tmp_path, command):
+    """build/flash --project-dir replaced the project's own rod_gains.h, where `rodctl gains --header` refuses to."""
+    proj = _project(tmp_path, "[env:teensy35]\nplatform = teensy\n")
+    mine = proj / "firmware" / "include" / "rod_gains.h"
+    mine.parent.mkdir(parents=True, exist_ok=True)
+    mine.write_text("/* my hand-tuned gains */\n")
+    assert cli.main([*command, "--project-dir", str(proj)]) == 2
+    assert _one_line(capsys) == (f"rodctl: the project's {mine} exists and is not a file rodctl generated; pass "
+                                 "--force to overwrite")
+    assert mine.read_text() == "/* my hand-tuned gains */\n"
 
 
 def test_online_without_the_platform_runs_platformio_and_summarizes_its_failure(tmp_path, monkeypatch, capsys):

@@ -365,6 +365,16 @@ def test_check_reads_the_paths_it_was_given_however_they_are_spelled(tmp_path):
     assert other.returncode == 1 and "not what the parameters generate" in other.stderr
 
 
+def test_check_judges_the_parameters_not_how_the_set_was_typed(tmp_path):
+    """Two --set in the other order, or a --set of the value the file already has, were "not what the parameters
+    generate": the check compared the banner's words, where the inputs' SHA-256 beside them is what was made."""
+    made = rodctl("gains", "--set", "rod.length=0.16", "--set", "motor.gear_ratio=30", "--header", "h.h", cwd=tmp_path)
+    assert made.returncode == 0, made.stderr
+    swapped = rodctl("gains", "--check", "--set", "motor.gear_ratio=30", "--set", "rod.length=0.16", "--set",
+                     "rod.edges=8", "--header", "h.h", cwd=tmp_path)
+    assert swapped.returncode == 0 and swapped.stdout.startswith("up to date:"), swapped.stderr
+
+
 def test_check_of_a_header_never_written_says_missing(tmp_path):
     """It said the missing files were "not what the parameters generate"."""
     h = tmp_path / "never.h"

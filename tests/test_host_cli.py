@@ -289,3 +289,23 @@ def test_every_file_the_parameter_file_cites_is_in_the_repository(tmp_path):
     cited = set(re.findall(r"\b((?:docs|firmware|host|gains)/[\w./-]+\.(?:md|toml|c|h|py))", out.read_text()))
     assert "docs/physics-notes.md" in cited
     assert all((paths.REPO / c).is_file() for c in cited), [c for c in cited if not (paths.REPO / c).is_file()]
+
+
+@pytest.mark.parametrize("argv", [["gains"], ["protocol"], ["docs"], ["build"]])
+def test_from_a_folder_in_another_clone_the_default_files_are_not_written(tmp_path, argv):
+    """An editable rodctl run from a second clone wrote the first clone's committed header, protocol files and
+    reference pages ("wrote firmware/include/rod_gains.h": the first clone's, shown as if it were this one's)."""
+    from rodctl import paths
+
+    other = tmp_path / "clone2"
+    (other / "firmware" / "protocol").mkdir(parents=True)
+    (other / "firmware" / "protocol" / "rodlink.toml").write_text("")
+    (other / "platformio.ini").write_text("")
+    (other / "sub").mkdir()
+    before = {f: f.stat().st_mtime_ns for f in (paths.COMMITTED_HEADER, paths.COMMITTED_PARAMS)}
+    r = run_rodctl(*argv, cwd=other / "sub")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    line = r.stderr.strip().splitlines()[-1]
+    assert f"this rodctl is installed from the clone {paths.REPO} and would write its files, but this folder is in " \
+           f"another clone, {other}: run this clone's own rodctl" in line, line
+    assert {f: f.stat().st_mtime_ns for f in before} == before

@@ -51,11 +51,24 @@ def shown(path: str | Path, root: Path | None = None) -> str:
         return str(path)
 
 
+def clone_around(folder: Path) -> Path | None:
+    """The clone of this repository that `folder` is in (itself or a parent), if any."""
+    folder = folder.resolve()
+    return next((d for d in (folder, *folder.parents) if _is_clone(d)), None)
+
+
 def require_checkout(what: str) -> None:
-    """UserError (one line, exit 2) when rodctl runs from an installed package, not a clone."""
+    """UserError (one line, exit 2) when rodctl runs from an installed package, not a clone, or when the current
+    folder is in another clone than the one this rodctl runs from: its default files are that clone's, and writing
+    them from a second clone's folder would change the first one's committed files unseen."""
     if not IN_CLONE:
         raise InputError(f"{what} needs a clone of this repository (its PlatformIO project and firmware/): "
                         f"git clone it, then `pip install -e .` inside it; this rodctl runs from {PACKAGE}")
+    here = clone_around(Path.cwd())
+    if here is not None and here != _CLONE.resolve():
+        raise InputError(f"{what}: this rodctl is installed from the clone {_CLONE} and would write its files, but "
+                         f"this folder is in another clone, {here}: run this clone's own rodctl (`pip install -e .` "
+                         "in it)")
 
 
 def require_firmware_sources() -> None:

@@ -31,28 +31,18 @@ def regenerate_command(params_path: str | None, overrides: Sequence[str], header
     return " ".join(shlex.quote(x) for x in parts)
 
 
-def _regenerate_key(line: str):
-    """A generated file's "Regenerate: rodctl gains ..." line without --params and --header: one command however
-    their paths were spelled or wherever it ran (my_rod.toml from /tmp/rig, /tmp/rig/my_rod.toml from elsewhere, a
-    copy of the default file). What the file held is the inputs' SHA-256 beside it, and the header is the file
-    being compared."""
-    _, _, command = line.partition("Regenerate: ")
-    try:
-        words = shlex.split(command)
-    except ValueError:
-        return line
-    paths_at = {i + 1 for i, w in enumerate(words) if w in ("--params", "--header")}
-    return tuple(w for i, w in enumerate(words) if i not in paths_at and w not in ("--params", "--header"))
-
-
-def _comparable(text: str) -> list:
-    return [_regenerate_key(ln) if "Regenerate: " in ln else ln for ln in text.splitlines()]
+def _comparable(text: str) -> list[str]:
+    """A generated file's lines without its "Regenerate: rodctl gains ..." line: however the command was spelled
+    (--params my_rod.toml from /tmp/rig or /tmp/rig/my_rod.toml from elsewhere, a copy of the default file, two
+    --set in either order, a --set of the value the file already has), what the file was made from is the inputs'
+    SHA-256 on the line below it, and what it holds is the rest of it."""
+    return [ln for ln in text.splitlines() if "Regenerate: " not in ln]
 
 
 def stale(files: dict[Path, str]) -> list[Path]:
-    """Of the generated files ({path: text}), those missing or not holding their text, the regenerate command's paths
-    left out (`rodctl gains --check --params /tmp/rig/my_rod.toml` of a header made with --params my_rod.toml in
-    /tmp/rig is current)."""
+    """Of the generated files ({path: text}), those missing or not holding their text, the regenerate command left
+    out (`rodctl gains --check --params /tmp/rig/my_rod.toml` of a header made with --params my_rod.toml in /tmp/rig
+    is current, and so is one made with the same values by --set)."""
     return atomic_file.stale(files, _comparable)
 
 

@@ -17,15 +17,27 @@ import time
 from pathlib import Path
 
 from rodgains.atomic_file import atomic_write
-from rodgains.errors import UserError
+from rodgains.errors import InputError, UserError
 
 from rodctl import paths
 from rodctl.build import header as gains_header
 from rodctl.build import platformio
+from rodctl.cli.outputs import check_regenerable
 from rodctl.link.session import is_tty
 
 
 BACK_ON_USB_S = 10.0  # how long a flashed board may take to come back on USB [s]
+
+
+def check_upload_port(port: str) -> None:
+    """InputError unless `port` can be a Teensy's serial port: an existing device, not a URL (the virtual board runs
+    this checkout's core and takes no firmware)."""
+    if "://" in port:
+        raise InputError(f"--port {port}: flash uploads to a Teensy on USB; the virtual board (sim://) needs no "
+                         "firmware: it runs this checkout's core with the parameters it is given")
+    if port.startswith("/") and not Path(port).exists():  # a device path (COM3 is not a file on Windows)
+        raise InputError(f"--port {port}: no such serial port (a Teensy shows as /dev/ttyACM0 on Linux; without "
+                         "--port, flash finds the one on USB)")
 
 
 def ensure_header(args, project: Path) -> None:
@@ -87,10 +99,17 @@ def run(args, upload: bool) -> int:
     from rodgains.params import load_params
 
     what = "flash" if upload else "build"
-    if not args.project_dir:
+    if args.project_dir is None:
         paths.require_checkout(f"rodctl {what}")
+    elif not args.project_dir.strip():  # an unset shell variable is not this checkout
+        raise InputError("--project-dir: empty folder name")
     load_params(args.params, args.overrides)  # the user's inputs first: a bad file is named, exit 2
-    project = Path(args.project_dir) if args.project_dir else paths.REPO
+    project = Path(args.project_dir) if args.project_dir is not None else paths.REPO
+    if upload and args.port is not None:
+        check_upload_port(args.port)
+    header = project / "firmware" / "include" / "rod_gains.h"  # where platformio.ini's project builds it from
+    for f in (header, header.with_suffix(".toml")):  # a hand-written header is the user's, as for rodctl gains
+        check_regenerable(f, "the project's", force=args.force, inputs=(args.params,))
     platform = platformio.env_platform(project, args.env)
     pio = platformio.find_platformio()
     name = platformio.platform_name(platform)
@@ -104,7 +123,7 @@ def run(args, upload: bool) -> int:
 
         upload_port = args.upload_port or args.port
         if upload_port is None and not args.no_port_check:
-            find_port(None)  # one clear line when no (or more than one) Teensy is on USB
+            find_port(None, simulated=False)  # one clear line when no (or more than one) Teensy is on USB
     ensure_header(args, project)
     cmd = [*pio, "run", "-e", args.env]
     if upload:
@@ -142,6 +161,8 @@ def register(sub) -> None:
         p.add_argument("--project-dir", metavar="DIR", help="PlatformIO project (default: the repository root); its "
                                                            "firmware/include/rod_gains.h is the header regenerated")
         p.add_argument("--verbose", "-v", action="store_true", help="show PlatformIO's output as it runs")
+        p.add_argument("--force", action="store_true", help="regenerate the project's rod_gains.h (and .toml) even "
+                                                            "when they are not files rodctl generated")
         if upload:
             p.add_argument("--port", metavar="PORT", help="the board's serial port (default: the one Teensy on USB)")
             p.add_argument("--upload-port", metavar="PORT", help="passed to PlatformIO as --upload-port")

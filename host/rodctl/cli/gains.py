@@ -77,8 +77,14 @@ def run_gains(args) -> int:
     # `is not None`: an empty name (an unset shell variable) is refused, never taken for "not given",
     # which would write the committed header in the checkout
     if args.json is not None:
+        if args.check:  # --check writes nothing: a --json beside it would be dropped without a word
+            raise InputError("--check writes nothing; drop --json, or write the design without --check")
         check_output(args.json, "--json", force=args.force)
         check_not_input(args.json, "--json", (args.params,))
+        if args.header is not None and args.header.strip():
+            h = Path(args.header).resolve()
+            if Path(args.json).resolve() in (h, h.with_suffix(".toml")):  # the second write would replace the first
+                raise InputError(f"--json {args.json}: --header {args.header} writes that file too; name another")
     if args.header is not None:
         check_name(args.header, "--header")
         if Path(args.header).suffix == ".toml":  # the parameter record beside the header would be the header itself

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shlex
 import sys
 from pathlib import Path
 
@@ -25,7 +26,8 @@ def run_protocol(args) -> int:
         if stale:
             names = ", ".join(paths.shown(p, root) for p in stale)
             print(f"rodctl protocol --check: {names} not what {gen.TOML_REL} generates; "
-                  f"regenerate with: {gen.COMMAND}", file=sys.stderr)
+                  f"regenerate with: {gen.COMMAND}" + (f" --root {shlex.quote(args.root)}" if args.root else ""),
+                  file=sys.stderr)
             return 1
         print(f"up to date: {', '.join(paths.shown(p, root) for p in gen.generated_files(root))}")
         return 0

@@ -18,8 +18,9 @@ def _is_teensy(p) -> bool:
     return p.vid == TEENSY_VID and p.pid == TEENSY_PID
 
 
-def find_port(explicit: str | None = None) -> str:
-    """The port to open: `explicit` when given, else the one Teensy on USB; one clear error otherwise."""
+def find_port(explicit: str | None = None, simulated: bool = True) -> str:
+    """The port to open: `explicit` when given, else the one Teensy on USB; one clear error otherwise (naming the
+    virtual board when `simulated`: a command that can talk to it)."""
     if explicit:
         return explicit
     from serial.tools import list_ports
@@ -32,7 +33,7 @@ def find_port(explicit: str | None = None) -> str:
         seen = ", ".join(_describe(p) for p in ports) or "none"
         raise UserError(
             f"no Teensy found (USB {TEENSY_VID:04X}:{TEENSY_PID:04X}); serial ports seen: {seen}. "
-            "Plug the board in, or pass --port PORT (or --port sim:// for the simulated rod)"
+            "Plug the board in, or pass --port PORT" + (" (or --port sim:// for the simulated rod)" if simulated else "")
         )
     listed = ", ".join(_describe(p) for p in teensies)
     raise UserError(f"{len(teensies)} Teensy boards found: {listed}; choose one with --port")
