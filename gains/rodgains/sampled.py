@@ -113,14 +113,16 @@ def spectral_radius(M: np.ndarray) -> float:
 
 
 def modal_visibility(A: np.ndarray, B: np.ndarray | None = None, C: np.ndarray | None = None,
-                     unstable_only_discrete: bool = False) -> tuple[float, complex]:
+                     unstable_only_discrete: bool = False, dead_below: float = -np.inf) -> tuple[float, complex]:
     """Worst modal controllability |w_i^T B| (left eigenvectors) or observability |C v_i| (right).
 
     Each eigenvector is normalized, so the number is the fraction of a unit mode the input
     reaches or the output sees; 0 means uncontrollable/unobservable. The paper's rod is
     observable from theta_1 in exact arithmetic, but its fastest damping modes are faint
     (3e-10 at N = 20), so an unscaled PBH rank test calls them unobservable. Returns
-    (worst value, its eigenvalue); unstable_only_discrete restricts to |lambda| >= 1.
+    (worst value, its eigenvalue); unstable_only_discrete restricts to |lambda| >= 1; dead_below [1/s] leaves out
+    the continuous modes decaying faster (gone within a sample: neither the sampled estimator nor the torque
+    has anything of them to see or move).
     """
     lam, V = np.linalg.eig(A)
     if C is not None:
@@ -128,6 +130,9 @@ def modal_visibility(A: np.ndarray, B: np.ndarray | None = None, C: np.ndarray |
     else:
         W = np.linalg.inv(V)
         vis = np.linalg.norm(W @ B, axis=1) / np.linalg.norm(W, axis=1)
+    if dead_below > -np.inf:
+        keep = lam.real >= dead_below
+        lam, vis = lam[keep], vis[keep]
     if unstable_only_discrete:
         keep = np.abs(lam) >= 1.0
         if not np.any(keep):
