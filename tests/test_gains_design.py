@@ -134,6 +134,7 @@ def test_a_rod_past_its_buckling_length_is_designed_with_a_warning(tmp_path, len
     (["--set", "rod.colour=3"], "rod.colour: unknown key"),
     (["--set", "lqr.q_angel=3"], "--set lqr.q_angel: unknown key (did you mean lqr.q_angle?)"),  # as a file's typo is
     (["--set", "lq.q_angle=3"], "--set lq.q_angle: unknown key (did you mean lqr.q_angle?)"),
+    (["--set", "rod.LENGTH=0.2"], "--set rod.LENGTH: unknown key (did you mean rod.length?)"),  # keys are lower case
     (["--set", "rodedges"], "expected section.key=value"),
     (["--set", "driver.supply_voltage=48"], "driver.supply_voltage: must be between 4.5 and 36"),
     (["--set", "safety.angle_limit_deg=20"], "safety.angle_limit_deg: must exceed"),

@@ -309,3 +309,14 @@ def test_from_a_folder_in_another_clone_the_default_files_are_not_written(tmp_pa
     assert f"this rodctl is installed from the clone {paths.REPO} and would write its files, but this folder is in " \
            f"another clone, {other}: run this clone's own rodctl" in line, line
     assert {f: f.stat().st_mtime_ns for f in before} == before
+
+
+def test_a_parameter_file_says_which_values_differ_from_the_default():
+    """`params --set motor.gear_ratio=30` kept the default's sources and notes ("[V]: 12 V / (500 rpm * 20.4)") beside
+    30 as if they were its own."""
+    r = run_rodctl("params", "--set", "motor.gear_ratio=30")
+    assert r.returncode == 0, r.stderr
+    ratio = next(ln for ln in r.stdout.splitlines() if ln.startswith("gear_ratio ="))
+    assert ratio.split("#", 1)[1].startswith(" CHANGED (default 20.4; the sources and notes here are the default's): G,")
+    assert sum("CHANGED" in ln for ln in r.stdout.splitlines()) == 1  # the one value set, nothing else
+    assert load_params(overrides=["motor.gear_ratio=30"]).to_toml() == r.stdout

@@ -253,3 +253,17 @@ def test_a_sim_whose_files_the_disk_refuses_leaves_none_of_them(tmp_path, limit_
                                          f"the run's files were not written ({out / 'p.png'}, {out / 'l.csv'}); "
                                          "free space or choose another folder, and run it again")
     assert list(out.iterdir()) == []
+
+
+def test_a_sim_names_the_parameters_it_ran(tmp_path):
+    """A 0.2 m rod on a 30:1 gearbox printed "(Table I rod, motor, gearbox, ...)" and never named its file."""
+    from rodgains.params import load_params
+
+    f = tmp_path / "long.toml"
+    f.write_text(load_params(overrides=["rod.length=0.16"]).to_toml())
+    r = subprocess.run([sys.executable, "-m", "rodctl.cli", "sim", "--params", str(f), "--set", "rod.damping=0.002",
+                        "--scenario", "balance", "--duration", "0.2", "--no-log", "--no-plot"], capture_output=True,
+                       text=True)
+    sha = load_params(f, ["rod.damping=0.002"]).sha256()[:16]
+    assert r.stdout.splitlines()[0] == (f"parameters: {f} --set rod.damping=0.002 (sha256 {sha}; a scenario may set "
+                                        "some itself, docs/scenarios.md)"), r.stdout

@@ -498,10 +498,10 @@ def _did_you_mean(section: str, key: str) -> str:
     """A misspelled key, or one put in the wrong table, named as the schema spells it."""
     import difflib
 
-    close = difflib.get_close_matches(key, list(SCHEMA[section]), n=1, cutoff=0.75)
+    close = difflib.get_close_matches(key.lower(), list(SCHEMA[section]), n=1, cutoff=0.75)  # LENGTH: length
     if close:
         return f" (did you mean {section}.{close[0]}?)"
-    elsewhere = [s for s, keys in SCHEMA.items() if key in keys]
+    elsewhere = [s for s, keys in SCHEMA.items() if key.lower() in keys]
     return f" (it belongs in [{elsewhere[0]}])" if elsewhere else ""
 
 
@@ -511,11 +511,11 @@ def _override_hint(section: str, key: str) -> str:
 
     if section in SCHEMA:
         return _did_you_mean(section, key)
-    close = difflib.get_close_matches(section, list(SCHEMA), n=1, cutoff=0.75)
-    if close and key in SCHEMA[close[0]]:
-        return f" (did you mean {close[0]}.{key}?)"
-    elsewhere = [s for s, keys in SCHEMA.items() if key in keys]
-    return f" (did you mean {elsewhere[0]}.{key}?)" if elsewhere else ""
+    close = difflib.get_close_matches(section.lower(), list(SCHEMA), n=1, cutoff=0.75)
+    if close and key.lower() in SCHEMA[close[0]]:
+        return f" (did you mean {close[0]}.{key.lower()}?)"
+    elsewhere = [s for s, keys in SCHEMA.items() if key.lower() in keys]
+    return f" (did you mean {elsewhere[0]}.{key.lower()}?)" if elsewhere else ""
 
 
 def validate(raw: dict, source: str = "parameters", plausible: bool = True) -> dict:
@@ -699,8 +699,10 @@ class Params:
         return self.with_overrides(f"encoder.counts_per_motor_rev={per_motor_turn}")
 
     def to_toml(self) -> str:
-        """The resolved values as a complete parameter file, keeping the default file's comments."""
+        """The resolved values as a complete parameter file, keeping the default file's comments; a value that
+        differs from the default file's says so first, since its comment's sources and notes are the default's."""
         out, section = [], None
+        default = load_params()
         for line in DEFAULT_PARAMS.read_text().splitlines():
             head = line.split("#", 1)[0].strip()
             if head.startswith("[") and head.endswith("]"):
@@ -710,6 +712,10 @@ class Params:
                 if key in SCHEMA[section]:
                     value = _toml_value(self.values[section][key])
                     comment = line[line.index("#"):] if "#" in line else ""
+                    was = default.values[section][key]
+                    if self.values[section][key] != was:
+                        comment = f"# CHANGED (default {_toml_value(was)}; the sources and notes here are the default's): " \
+                                  + comment.lstrip("# ")
                     line = f"{key} = {value}".ljust(max(28, len(key) + len(value) + 4)) + comment
             out.append(line)
         return "\n".join(out) + "\n"

@@ -132,8 +132,10 @@ def run_gains(args) -> int:
             make_folder(f.parent, f"--header {f}")
             _write(f, text)
         rho = d.checks["closed_loop_spectral_radius"]
+        from rodgains.report import radius_text
+
         print(f"wrote {', '.join(str(f) for f in files)}  (N={d.N}, {1 / d.dt:g} Hz, "
-              f"closed-loop spectral radius {rho:.5f})")
+              f"closed-loop spectral radius {radius_text(rho, 5)})")  # 0.9999999991 is not "1.00000"
     return 0
 
 
@@ -153,7 +155,8 @@ def register(sub) -> None:
                        description="Design gains for the sampled loop and generate firmware/include/rod_gains.h. "
                                    "Exit 2: bad parameters; exit 3: the design would not stabilize the loop.")
     add_param_args(g)
-    g.add_argument("--header", metavar="PATH", help="write the header here (default firmware/include/rod_gains.h)")
+    g.add_argument("--header", metavar="PATH", help="write the header here (default firmware/include/rod_gains.h; "
+                                                    "with --report or --json and no --header, none is written)")
     g.add_argument("--json", metavar="PATH", help="write the design (A, B, Ad, Bd, C, K, L, ...) as JSON")
     g.add_argument("--check", action="store_true", help="exit 1 if the header on disk is not what the parameters generate")
     g.add_argument("--report", action="store_true", help="print poles, margins, critical lengths, the paper's K sampled")

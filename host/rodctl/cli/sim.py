@@ -170,6 +170,11 @@ def run_sim(args) -> int:
         check_faithful(params)
     if args.all and args.readme:  # before every scenario has run, not after
         check_table_page(Path(args.readme))
+    from rodctl import paths
+
+    typed_over = " ".join(typed[o] for o in typed)
+    print(f"parameters: {paths.shown(params.source)}{' ' + typed_over if typed_over else ''} "
+          f"(sha256 {params.sha256()[:16]}; a scenario may set some itself, docs/scenarios.md)")
     outcomes, unexpected = [], []
     for name in names:
         o, wall, written = run_one(args, name, params, all_mode=args.all)

@@ -407,7 +407,7 @@ def _register(s: Scenario) -> None:
 
 # With 1 deg of gearbox play the nominal rig holds the rod within the matrix's 3 deg band, not the
 # 1 deg goal: a documented failure (docs/control.md "What the matrix shows").
-_register(Scenario("swingup", "Swing-up and balance on the testbed (Table I rod, motor, gearbox, driver, encoder)", "",
+_register(Scenario("swingup", "Swing-up and balance on the testbed (the file's rod, motor, gearbox, driver, encoder)", "",
                    swingup, "testbed", expect_pass=False))
 _register(Scenario("balance", "Balance from 30 deg: output feedback, quantization, torque limit, gearbox", "(d)",
                    balance, "testbed", expect_pass=False))
