@@ -128,6 +128,16 @@ def test_the_tip_imu_s_mass_shortens_the_clamped_buckling_length():
         assert clamped_ratio(edge) == pytest.approx(1.0, abs=1e-6), key
 
 
+def test_the_margins_of_an_imu_far_from_the_tip_are_found():
+    """The length margin tried shorter rods as parameter files, which refuse an IMU on the model's clamped edge:
+    `gains --report` and identify stopped on a valid rig (the IMU 5 cm from the tip at 4 edges) with that error."""
+    p = load_params(overrides=["sensors.tip_imu=true", "sensors.imu_from_tip=0.05", "rod.edges=4"])
+    m = buckling_margins(p)
+    assert 0.94 < clamped_ratio(p) < 0.96 and 0.0 < m["length"] < 0.058  # nearer the hub it weighs less
+    assert clamped_ratio(p.with_overrides(f"rod.length={p['rod']['length'] * (1 + m['length'])!r}",
+                                          plausible=False)) == pytest.approx(1.0, abs=1e-6)
+
+
 def test_nlink_critical_length_converges_to_continuum():
     p = load_params(overrides=["rod.edges=5"])  # Table I's N
     lc = greenhill_length(p)

@@ -306,7 +306,7 @@ def test_from_a_folder_in_another_clone_the_default_files_are_not_written(tmp_pa
     r = run_rodctl(*argv, cwd=other / "sub")
     assert r.returncode == 2 and "Traceback" not in r.stderr
     line = r.stderr.strip().splitlines()[-1]
-    assert f"this rodctl is installed from the clone {paths.REPO} and would write its files, but this folder is in " \
+    assert f"this rodctl is installed from the clone {paths.REPO} and works on its files, but this folder is in " \
            f"another clone, {other}: run this clone's own rodctl" in line, line
     assert {f: f.stat().st_mtime_ns for f in before} == before
 

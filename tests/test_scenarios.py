@@ -241,6 +241,12 @@ def test_a_sim_whose_files_the_disk_refuses_leaves_none_of_them(tmp_path, limit_
     import resource
     import signal
 
+    from rodctl.build.sil_build import build_sil
+    from rodctl.sim.plant import library_path
+    from rodgains.params import load_params
+
+    library_path(), build_sil(load_params())  # built here first: the limit below is for the run's files, not these
+
     def limit() -> None:
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))  # the 1 s log ~290 kB, its truth ~340

@@ -55,37 +55,54 @@ def nlink_critical_length(p: Params, edges: int | None = None) -> float:
 TIP_MASS_EDGES = 400  # the clamped rod's discretization for the tip IMU's share: the factor within 1e-5 of 800's
 
 
-def _gravity_margin(p: Params, imu: bool) -> float:
-    """How many times its own weight (and the IMU's) the rod above the hub, clamped there, bears before it
-    buckles [-], on TIP_MASS_EDGES equal links: the upright potential's Hessian (EI / l) Lap - m g l diag(c)
-    stops being positive definite at lambda_min(Lap, diag(c)) EI / (m g l^2)."""
+def _gravity_margin(above_hub_m: float, mass_per_m: float, EI: float, g: float,
+                    imu: tuple[float, float] | None) -> float:
+    """How many times its own weight (and the IMU's) a rod above_hub_m long [m] of mass_per_m [kg/m], clamped at
+    the hub, bears before it buckles [-], on TIP_MASS_EDGES equal links: the upright potential's Hessian
+    (EI / l) Lap - m g l diag(c) stops being positive definite at lambda_min(Lap, diag(c)) EI / (m g l^2).
+    imu: (its distance from the tip [m], its mass [kg]), or None. Plain numbers, not Params: the margins below
+    try rods the parameter checks would refuse (one so short that the IMU sits on the model's clamped edge)."""
     from .imu import ImuSite
 
-    r, n = p["rod"], TIP_MASS_EDGES
-    length = r["length"] - p["plant"]["hub_length"]
-    l = length / n
+    n = TIP_MASS_EDGES
+    l = above_hub_m / n
     extra = ()
-    if imu:
-        s = length - p["sensors"]["imu_from_tip"]
-        j = min(max(int(s / l), 0), n - 1)
-        extra = tuple(ImuSite(edge=j, frac=float(s / l - j), position=float(s)).node_masses(n, p["sensors"]["imu_mass"]))
-    rod = RodModel(N=n, l=l, m=r["density"] * r["width"] * r["thickness"] * l, EI=p.EI, d=0.0, g=r["gravity"],
-                   extra_mass=extra)
+    if imu is not None and above_hub_m - imu[0] > 0.0:  # an IMU inside the hub is held by the shaft, not the rod
+        s = above_hub_m - imu[0]
+        j = min(int(s / l), n - 1)
+        extra = tuple(ImuSite(edge=j, frac=float(s / l - j), position=float(s)).node_masses(n, imu[1]))
+    rod = RodModel(N=n, l=l, m=mass_per_m * l, EI=EI, d=0.0, g=g, extra_mass=extra)
     # (Lap, diag(c)) as one symmetric tridiagonal matrix, diag(c)^-1/2 Lap diag(c)^-1/2: its lowest eigenvalue alone
     lap, w = rod.laplacian[1:, 1:], 1.0 / np.sqrt(rod.mass_below[1:])
     lam = sla.eigh_tridiagonal(np.diag(lap) * w * w, np.diag(lap, 1) * w[:-1] * w[1:], eigvals_only=True,
                                select="i", select_range=(0, 0))[0]
-    return float(lam * rod.EI / (rod.m * rod.g * l**2))
+    return float(lam * EI / (rod.m * g * l**2))
+
+
+def _ratio(p: Params, density_scale: float = 1.0, length_m: float | None = None) -> float:
+    """clamped_ratio of p's rod with its density scaled and its whole length (hub included) length_m [m]."""
+    r = p["rod"]
+    lc = greenhill_length(p)
+    if not math.isfinite(lc):
+        return 0.0
+    above = (r["length"] if length_m is None else length_m) - p["plant"]["hub_length"]
+    ratio = above / (lc * density_scale ** (-1.0 / 3.0))  # Greenhill's length goes as rho^(-1/3)
+    if not p["sensors"]["tip_imu"]:
+        return ratio
+    q = r["density"] * density_scale * r["width"] * r["thickness"]
+    imu = (p["sensors"]["imu_from_tip"], p["sensors"]["imu_mass"])
+    # a load the rod bears scales its critical length as load^(-1/3): the cube root of the margins' ratio, which
+    # cancels the links' own discretization error
+    factor = (_gravity_margin(above, q, p.EI, r["gravity"], None)
+              / _gravity_margin(above, q, p.EI, r["gravity"], imu)) ** (1.0 / 3.0)
+    return ratio * factor
 
 
 def tip_mass_factor(p: Params) -> float:
     """The rod's clamped buckling length without the tip IMU over that with its mass on it [-]: 1 without the IMU
-    (sensors.tip_imu false); Table I's rod with the default 2 g at its tip 1.020. A load the rod bears scales its
-    critical length as load^(-1/3), so this is the cube root of the gravity margins' ratio, which cancels the
-    links' own discretization error."""
-    if not p["sensors"]["tip_imu"] or p["rod"]["gravity"] == 0:
-        return 1.0
-    return (_gravity_margin(p, imu=False) / _gravity_margin(p, imu=True)) ** (1 / 3)
+    (sensors.tip_imu false); Table I's rod with the default 2 g at its tip 1.020."""
+    bare = _ratio(p.with_overrides("sensors.tip_imu=false")) if p["sensors"]["tip_imu"] else 0.0
+    return _ratio(p) / bare if bare > 0.0 else 1.0
 
 
 def clamped_ratio(p: Params) -> float:
@@ -97,34 +114,30 @@ def clamped_ratio(p: Params) -> float:
     still, and the only way to keep it straight is to move the shaft under it, which the encoder
     sees only after the rod has bent (docs/identification.md: three stiff-shaft designs held
     no run from 1.007 on)."""
-    lc = greenhill_length(p)
-    return (p["rod"]["length"] - p["plant"]["hub_length"]) / lc * tip_mass_factor(p) if math.isfinite(lc) else 0.0
+    return _ratio(p)
 
 
 def buckling_margins(p: Params) -> dict[str, float]:
     """The relative change of rod.youngs_modulus, rod.density or rod.length (the whole rod, hub
     included) alone that brings clamped_ratio to 1 [-]: negative for a drop. Greenhill's length
-    goes as (E / rho)^(1/3). Without gravity nothing buckles: +-inf."""
+    goes as (E / rho)^(1/3); the tip IMU's load scales with E's margin too, not with the density or the length,
+    whose margins are then solved for. Without gravity nothing buckles: +-inf."""
     r = clamped_ratio(p)
     if r <= 0.0:
         return {"youngs_modulus": -math.inf, "density": math.inf, "length": math.inf}
     hub, length = p["plant"]["hub_length"], p["rod"]["length"]
-    if tip_mass_factor(p) == 1.0:
+    if not p["sensors"]["tip_imu"]:
         critical = (length - hub) / r  # Greenhill's length, from the ratio
         return {"youngs_modulus": r**3 - 1.0, "density": r**-3 - 1.0, "length": (critical + hub) / length - 1.0}
-    # the IMU's mass does not scale with the rod's density or length: those two margins are solved for
-    bare = clamped_ratio(p.with_overrides("sensors.tip_imu=false"))
+    bare = _ratio(p.with_overrides("sensors.tip_imu=false"))  # the IMU's mass can only add to the load
 
-    def ratio_at(key: str, x: float) -> float:
-        return clamped_ratio(p.with_overrides(f"rod.{key}={p['rod'][key] * (1.0 + x)!r}", plausible=False)) - 1.0
+    def solved(f, lo: float, hi: float) -> float:
+        return float(brentq(lambda x: f(x) - 1.0, lo, hi, xtol=1e-7)) if f(lo) < 1.0 <= f(hi) else math.nan
 
-    def solved(key: str, lo: float, hi: float) -> float:
-        return float(brentq(lambda x: ratio_at(key, x), lo, hi, xtol=1e-7)) if ratio_at(key, lo) < 0.0 else math.nan
-
-    near = p["sensors"]["imu_from_tip"] + hub  # the shortest rod that still carries the IMU above its hub
     return {"youngs_modulus": r**3 - 1.0,
-            "density": solved("density", -0.999, bare**-3 - 1.0),  # bare: the IMU's mass can only add to the load
-            "length": solved("length", near / length - 1.0 + 1e-6, ((length - hub) / bare + hub) / length - 1.0)}
+            "density": solved(lambda x: _ratio(p, density_scale=1.0 + x), -0.999, bare**-3 - 1.0),
+            "length": solved(lambda x: _ratio(p, length_m=length * (1.0 + x)), (hub + 1e-6) / length - 1.0,
+                             ((length - hub) / bare + hub) / length - 1.0)}
 
 
 def margins_text(p: Params) -> str:

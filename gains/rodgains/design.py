@@ -286,9 +286,9 @@ def design(p: Params, progress=None) -> Design:
 
     # a mode decaying by 1e6 within one period is gone before the next sample: at N = 60 the fastest joint damping
     # modes (-1.4e6 rad/s) were refused as "invisible in theta_1" at rounding level (7.7e-14)
-    dead = math.log(DEAD_WITHIN_A_PERIOD) / dt
-    ctrb, ctrb_mode = sampled.modal_visibility(A, B=B, dead_below=dead)
-    obsv, obsv_mode = sampled.modal_visibility(A, C=C, dead_below=dead)
+    dead_rate_1_s = math.log(DEAD_WITHIN_A_PERIOD) / dt
+    ctrb, ctrb_mode = sampled.modal_visibility(A, B=B, dead_below=dead_rate_1_s)
+    obsv, obsv_mode = sampled.modal_visibility(A, C=C, dead_below=dead_rate_1_s)
     checks = {"controllability": ctrb, "observability": obsv}
     if ctrb < VISIBILITY_FLOOR:
         raise DesignRefused(f"design refused: the mode at {ctrb_mode:.4g} rad/s cannot be moved by the base torque "

@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import re
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -714,11 +715,18 @@ class Params:
                     comment = line[line.index("#"):] if "#" in line else ""
                     was = default.values[section][key]
                     if self.values[section][key] != was:
-                        comment = f"# CHANGED (default {_toml_value(was)}; the sources and notes here are the default's): " \
-                                  + comment.lstrip("# ")
+                        comment = f"# {changed_note(was)}" + comment.lstrip("# ")
                     line = f"{key} = {value}".ljust(max(28, len(key) + len(value) + 4)) + comment
             out.append(line)
         return "\n".join(out) + "\n"
+
+
+def changed_note(default_value: Any) -> str:
+    """What Params.to_toml puts first in the comment of a value that differs from the default file's."""
+    return f"CHANGED (default {_toml_value(default_value)}; the sources and notes here are the default's): "
+
+
+CHANGED_NOTE = re.compile(r"CHANGED \(default .*?; the sources and notes here are the default's\): ")
 
 
 def _toml_value(v: Any) -> str:

@@ -64,9 +64,12 @@ def require_checkout(what: str) -> None:
     if not IN_CLONE:
         raise InputError(f"{what} needs a clone of this repository (its PlatformIO project and firmware/): "
                         f"git clone it, then `pip install -e .` inside it; this rodctl runs from {PACKAGE}")
-    here = clone_around(Path.cwd())
+    try:
+        here = clone_around(Path.cwd())
+    except OSError:  # the current folder was removed under the shell, or a parent cannot be read: no clone here
+        here = None
     if here is not None and here != _CLONE.resolve():
-        raise InputError(f"{what}: this rodctl is installed from the clone {_CLONE} and would write its files, but "
+        raise InputError(f"{what}: this rodctl is installed from the clone {_CLONE} and works on its files, but "
                          f"this folder is in another clone, {here}: run this clone's own rodctl (`pip install -e .` "
                          "in it)")
 

@@ -114,7 +114,8 @@ def run_console(args) -> int:
                         ack = s.disarm()
                         print(f"mode {name_of(P.Mode, ack.mode)}{ignored}")
                     elif cmd in ("clear", "clear-fault"):
-                        before = s.telemetry  # streaming: the board's mode a frame ago
+                        # streaming: the board's mode a frame ago (none yet just after connecting: wait for one)
+                        before = s.telemetry if s.telemetry is not None else s.wait_telemetry(timeout=2.0)
                         print(cleared_text(before, s.clear_fault()))
                     elif cmd == "set":
                         if not rest:

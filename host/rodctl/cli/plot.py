@@ -62,10 +62,11 @@ def run_plot(args) -> int:
         check_output(default_figure(args.log), "figure (no --out, no display)", figure=True)
     from rodctl.logs.reader import cut_short
 
-    from rodctl.logs.reader import LARGE_LOG_BYTES
+    from rodctl.logs.reader import reading_note
 
-    if Path(args.log).is_file() and Path(args.log).stat().st_size >= LARGE_LOG_BYTES:  # seconds of silence else
-        print(f"reading {args.log} ({Path(args.log).stat().st_size / 1e6:.0f} MB) ...", file=sys.stderr, flush=True)
+    note = reading_note(args.log)  # seconds of silence else
+    if note:
+        print(f"{note} ...", file=sys.stderr, flush=True)
     log = read_log(args.log, columns=PLOT_COLUMNS)
     meta, data = log
     short = cut_short(log)

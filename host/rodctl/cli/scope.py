@@ -16,7 +16,6 @@ import shlex
 import signal
 import sys
 import threading
-from pathlib import Path
 
 from rodgains.errors import InputError, UserError
 
@@ -82,7 +81,7 @@ def log_instead(args, out: str) -> str:
 
 
 def run_scope(args) -> int:
-    from rodctl.cli.plot import display_problem
+    from rodctl.cli.plot import default_figure, display_problem
 
     from rodctl.cli.common import ctrl_c_watch, session_for
 
@@ -92,7 +91,7 @@ def run_scope(args) -> int:
     if why is not None:
         out = getattr(args, "record", None) or f"run.{getattr(args, 'format', None) or 'csv'}"
         raise UserError(f"the scope needs a display: {why}. Record instead with `{log_instead(args, out)}`, then "
-                        f"`rodctl plot {shlex.quote(out)} --out {shlex.quote(str(Path(out).with_suffix('.png')))}`")
+                        f"`rodctl plot {shlex.quote(out)} --out {shlex.quote(default_figure(out))}`")
     from rodctl.scope.loop import close_scope, open_scope, run_window, shot_saved
 
     stop = threading.Event()
@@ -113,13 +112,17 @@ def run_scope(args) -> int:
         def display_lost(why: str) -> None:  # Xlib ends the process after this: no finally below runs
             kept = ""
             try:
+                s.disarm()  # first: a recording's last flush to a slow disk must not keep the motor on
+            except Exception:  # noqa: BLE001 - the close below tries again; then the watchdog disarms, as said
+                pass
+            try:
                 if scope is not None:
                     scope.finish()  # the recording closed; no figure call: the display is gone
                     kept = f"; recorded {', '.join(scope.recorded)}" if scope.recorded else ""
-            except Exception:  # noqa: BLE001 - the disarm below matters more
+            except Exception:  # noqa: BLE001 - the board is disarmed; the line below says what was kept
                 pass
             try:
-                s.close()  # DISARM, and its acknowledgement
+                s.close()  # DISARM again, and its acknowledgement
             except Exception:  # noqa: BLE001 - then the watchdog disarms, as said
                 pass
             state = "disarmed" if s.disarm_acked else "disarm not confirmed (the watchdog disarms)"
@@ -127,8 +130,8 @@ def run_scope(args) -> int:
 
         from rodctl.scope import display_guard
 
-        display_guard.install(display_lost)
         try:
+            display_guard.install(display_lost)
             scope = open_scope(s, args, say=say)
             if args.record:
                 scope.toggle_recording()

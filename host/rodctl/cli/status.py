@@ -27,7 +27,8 @@ def status_report(session: Session, args=None) -> dict:
         "rate_hz": 1e6 / h.period_us,
         "decimation": h.decimation,
         # the board's f32 to its 7 digits: 180 deg, not the 180.00000500895632 its radians make
-        "settings": {k: None if v != v else float(f"{v:.7g}") for k, v in hello_settings(h).items()},  # NaN: unknown
+        "settings": {k: None if v != v else v if k == "counts_per_rev" else float(f"{v:.7g}")  # NaN: unknown; the
+                     for k, v in hello_settings(h).items()},  # counts a fraction num / den, not an f32
         "settings_units": {k: SETTINGS[k].unit or "1" for k in SETTINGS},
         "signs_from": rig_source(h),
         "torque_max_Nm": float(f"{h.torque_max:.7g}"),

@@ -44,7 +44,8 @@ def buckling_line(identified) -> str:
     from rodctl.sim.matrix import buckled_cases
 
     ratio = clamped_ratio(identified)
-    text = (f"buckling: the rod above the hub is {ratio:.3f} x its clamped buckling length (Greenhill)"
+    text = (f"buckling: the rod above the hub is {ratio:.3f} x its clamped buckling length (Greenhill's"
+            + (", with the tip IMU's mass)" if identified["sensors"]["tip_imu"] else ")")
             + (f"; it reaches 1 at {margins_text(identified)}" if 0.0 < ratio < 1.0 else ""))
     past = buckled_cases(identified)
     if past:

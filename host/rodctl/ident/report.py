@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from rodgains.atomic_file import replacing
+from rodgains.params import CHANGED_NOTE
 
 from rodctl.ident.fit import FIT_PARAMS, FitResult, validation_text, with_values
 
@@ -43,6 +44,7 @@ def _identified_comment(line: str) -> str:
     if "#" not in line:
         return line
     value, comment = line.split("#", 1)
+    comment = CHANGED_NOTE.sub("", comment, count=1)  # identify names the source itself
     unit_end = comment.find("]")
     what = comment[:unit_end + 1].rstrip() if unit_end >= 0 else comment.rstrip()
     return f"{value}#{what}   [rodctl identify]"

@@ -215,6 +215,13 @@ def cut_short(log: "Log") -> str | None:
 LARGE_LOG_BYTES = 8 << 20  # a log this large takes seconds to read: plot and log-convert say so first
 
 
+def reading_note(path: str | Path) -> str | None:
+    """"reading PATH (N MB)" for a log large enough to take seconds to read, else None."""
+    path = Path(path)
+    size = path.stat().st_size if path.is_file() else 0
+    return f"reading {path} ({size / 1e6:.0f} MB)" if size >= LARGE_LOG_BYTES else None
+
+
 def convert_log(src: str | Path, out: str | Path, fmt: str | None = None, overwrite: bool = False,
                 warn=None, say=None) -> Path:
     """Write the log `src` (any format) as `out` (format from fmt or out's extension); returns out.
@@ -230,9 +237,9 @@ def convert_log(src: str | Path, out: str | Path, fmt: str | None = None, overwr
     for f in files_of(out, fmt):
         if f.resolve() in theirs:  # --force would replace the source's own sidecar or events
             raise InputError(f"{out}: its copy would write {f}, a file of the log being converted; choose another --out")
-    big = say is not None and src.is_file() and src.stat().st_size >= LARGE_LOG_BYTES
-    if big:
-        say(f"reading {src} ({src.stat().st_size / 1e6:.0f} MB)")
+    note = reading_note(src) if say is not None else None
+    if note:
+        say(note)
     log = read_log(src)
     short = cut_short(log)
     if short and warn is not None:
@@ -248,7 +255,7 @@ def convert_log(src: str | Path, out: str | Path, fmt: str | None = None, overwr
     if missing:  # before the writer makes its files: a refused log leaves none behind
         raise InputError(f"{src}: no column {missing[0]}; cannot convert")
     w = LogWriter(out, meta, n=n, fmt=fmt, overwrite=overwrite)
-    if big:
+    if note:
         say(f"writing {out} ({len(log.data):,} rows)")
     rows = log.data[want].tolist()
     ev = log.events.tolist()

@@ -5,7 +5,9 @@ server killed) or when an X error reaches its default handler (the scope's windo
 `finally` blocks never run, the session never sends DISARM, and the board stays armed until its heartbeat
 watchdog trips (up to `heartbeat_timeout`, 10 s at most). Both handlers are Xlib's process-wide ones, set through
 ctypes on the libX11 that Tk uses; the error handler is set before Tk opens the display, so Tk keeps handling
-the errors it expects and passes on only those it would have left to Xlib's default.
+the errors it expects and passes on only those it would have left to Xlib's default. Only with matplotlib's Tk
+backend (TkAgg, the one the scope is tested on): Qt's xcb plugin sets both handlers itself when it opens the
+display, and its own exit would win; there the board's watchdog disarms it.
 """
 
 from __future__ import annotations
@@ -34,7 +36,12 @@ def _libx11():
 def install(on_lost: Callable[[str], None]) -> bool:
     """Call on_lost(why) and then end the process with exit code 1 when the X display is lost or an X error
     would end it. on_lost must not raise. Returns whether the handlers are set (a machine without libX11, or a
-    session without DISPLAY, has no X display to lose). Call it before the first window is made."""
+    session without DISPLAY, has no X display to lose; another backend than TkAgg sets its own). Call it before
+    the first window is made."""
+    import matplotlib
+
+    if matplotlib.get_backend().lower() != "tkagg":
+        return False
     x11 = _libx11()
     if x11 is None:
         return False
