@@ -922,7 +922,8 @@ def test_a_loop_too_slow_for_the_rate_filter_is_refused_naming_both_keys(tmp_pat
     blows up and the board trips SPEED_LIMIT 20 ms after arming. The ceiling is the pole at 0."""
     r = run_rodctl("gains", "--report", "--set", "loop.rate_hz=100")
     assert r.returncode == 2 and _one_line(r) == ("rodctl: encoder.rate_bandwidth_hz: must be at most loop.rate_hz / (2 pi) "
-                                                  "= 15.9 [Hz], got 50.0: past it the sampled rate filter rings")
+                                                  "= 15.9 [Hz], got 50.0: past it the sampled rate filter rings (with --set "
+                                                  "loop.rate_hz=100)")
     out = tmp_path / "d.json"
     ok = run_rodctl("gains", "--json", str(out), "--set", "loop.rate_hz=100", "--set", "encoder.rate_bandwidth_hz=15")
     assert ok.returncode == 0 and out.stat().st_size > 0, ok.stderr
@@ -951,7 +952,7 @@ def test_a_run_that_faults_says_which_fault_and_when():
     ("rod.edges=true", "rodctl: rod.edges: expected an integer [-], got true"),  # the file's spelling, not Python's
     ("motor.gear_ratio=5", "rodctl: swing_up.amplitude: must be in [0.001, 0.04964] N m, the firmware's torque "
      "ceiling (set by driver.current_limit 1.7 A x the motor's torque at the output, motor.gear_ratio 5 x "
-     "torque_constant 0.01123 x gearbox_efficiency 0.52), got 0.05"),  # names the key the user did change
+     "torque_constant 0.01123 x gearbox_efficiency 0.52), got 0.05 (with --set motor.gear_ratio=5)"),  # and the --set
 ])
 def test_a_value_is_named_as_the_user_wrote_it(override, line):
     r = run_rodctl("gains", "--report", "--set", override)

@@ -135,6 +135,9 @@ def test_a_rod_past_its_buckling_length_is_designed_with_a_warning(tmp_path, len
     (["--set", "lqr.q_angel=3"], "--set lqr.q_angel: unknown key (did you mean lqr.q_angle?)"),  # as a file's typo is
     (["--set", "lq.q_angle=3"], "--set lq.q_angle: unknown key (did you mean lqr.q_angle?)"),
     (["--set", "rod.LENGTH=0.2"], "--set rod.LENGTH: unknown key (did you mean rod.length?)"),  # keys are lower case
+    # a file's value that only a --set makes wrong: the --set named, not the file blamed
+    (["--set", "loop.rate_hz=100"], "encoder.rate_bandwidth_hz: must be at most loop.rate_hz / (2 pi) = 15.9 [Hz], "
+                                    "got 50.0: past it the sampled rate filter rings (with --set loop.rate_hz=100)"),
     (["--set", "rodedges"], "expected section.key=value"),
     (["--set", "driver.supply_voltage=48"], "driver.supply_voltage: must be between 4.5 and 36"),
     (["--set", "safety.angle_limit_deg=20"], "safety.angle_limit_deg: must exceed"),

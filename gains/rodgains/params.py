@@ -490,9 +490,20 @@ def load_params(path: str | Path | None = None, overrides: list[str] | tuple[str
     try:
         return Params(validate(raw, source=str(path)), source=str(path))
     except ParamError as e:  # a bad value the file holds is named with the file, as a bad key is
+        if given and e.key not in given and _valid(tomllib.loads(text), path):  # the file is fine: a --set made it
+            raise ParamError(f"{e} (with {' '.join('--set ' + o for o in overrides)})", key=e.key) from None
         if path != DEFAULT_PARAMS and e.key is not None and e.key not in given:
             raise ParamError(f"{path}: {e}", key=e.key) from None
         raise
+
+
+def _valid(raw: dict, path: Path) -> bool:
+    """Whether a parameter file's own values pass validate."""
+    try:
+        validate(raw, source=str(path))
+    except ParamError:
+        return False
+    return True
 
 
 def _did_you_mean(section: str, key: str) -> str:
