@@ -6,6 +6,7 @@ start, counts failed USB writes as dropped, and paces the watchdog refresh."""
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 from pathlib import Path
@@ -65,11 +66,13 @@ def harness(tmp_path_factory):
 
 
 def run_board(exe, seconds=1.0, timer_ok=True, fail_writes=(-1, 0), host: bytes = b"", upload_at_s=-1.0,
-              reset_cause=(0x82, 0)):
-    """reset_cause: RCM_SRS0, RCM_SRS1 at start-up (default a power-on's: POR and LVD)."""
+              reset_cause=(0x82, 0), eeprom_fails=0):
+    """reset_cause: RCM_SRS0, RCM_SRS1 at start-up (default a power-on's: POR and LVD); eeprom_fails: the first
+    EEPROM writes that change nothing."""
     r = subprocess.run([str(exe), str(seconds), "1" if timer_ok else "0", f"{fail_writes[0]},{fail_writes[1]}",
                         host.hex() or "-", str(upload_at_s), f"{reset_cause[0]:x},{reset_cause[1]:x}"],
-                       capture_output=True, text=True, timeout=120)
+                       capture_output=True, text=True, timeout=120,
+                       env={**os.environ, "HARNESS_EEPROM_FAILS": str(eeprom_fails)})
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()
     out = dict(ln.split("=", 1) for ln in lines[1:])
@@ -152,12 +155,17 @@ def test_an_upload_request_turns_the_driver_off_on_the_next_step(harness):
     assert not tlm[-1].flags & P.TelemetryFlag.DRIVER_ENABLED
 
 
-@pytest.mark.parametrize("cause, held", [((0x20, 0), True), ((0, 0x02), True), ((0x40, 0), False), ((0x82, 0), False)],
-                         ids=["watchdog", "lockup", "pin-reset", "power-on"])
-def test_a_restart_from_the_watchdog_or_a_lockup_refuses_to_arm(harness, cause, held):
-    """After the watchdog or a core lockup the count's zero is wherever the run left the rod (upright, mid-swing):
-    the board holds FAULT, reason RESET, refuses ARM and CLEAR_FAULT, and never enables the driver. After a
-    power-on, a pin reset or an upload the rod hung with the driver off, and it arms."""
+@pytest.mark.parametrize("cause, held", [((0x20, 0), True), ((0, 0x02), True), ((0x02, 0), True), ((0, 0x04), True),
+                                         ((0x04, 0), True), ((0x08, 0), True), ((0, 0x20), True),
+                                         ((0x40, 0), False), ((0x82, 0), False), ((0, 0x08), False)],
+                         ids=["watchdog", "lockup", "brown-out", "software", "clock-lost", "pll-lost", "stop-error",
+                              "pin-reset", "power-on", "debugger"])
+def test_a_restart_of_the_running_board_refuses_to_arm(harness, cause, held):
+    """After the watchdog, a core lockup, a brown-out (a low-voltage reset without a power-on: the USB 5 V dipping
+    as the motor starts), a software reset, a lost clock or a stop-mode error the count's zero is wherever the run
+    left the rod (upright, mid-swing): the board holds FAULT, reason RESET, refuses ARM and CLEAR_FAULT, and never
+    enables the driver. After a power-on, a pin reset (an upload's) or a debugger's the rod hung with the driver
+    off, and it arms. A brown-out was taken for a power-on."""
     host = P.encode(P.ClearFault(), 1) + P.encode(P.Arm(P.ArmMode.SWING_UP), 2)
     frames, _, out = run_board(harness, seconds=0.3, host=host, reset_cause=cause)
     acks = {f.msg.command_seq: f.msg for f in frames if f.type == P.MsgType.ACK}
@@ -170,3 +178,16 @@ def test_a_restart_from_the_watchdog_or_a_lockup_refuses_to_arm(harness, cause, 
     else:
         assert acks[2].result == P.AckResult.OK and out["nen_low_ever"] == "1"
         assert tlm[-1].mode == P.Mode.SWING_UP
+
+
+def test_a_rig_record_that_does_not_read_back_never_holds_arm(harness):
+    """A SAVE_RIG whose EEPROM write failed left the save pending for good: every ARM and IDENTIFY after it was BUSY
+    ("send again") until a power cycle. Now the failed write only keeps STORED off; a second SAVE_RIG stores it."""
+    idle = b"\0" * (64 * 100)  # empty frames: the main loop reads 64 bytes a pass, 20 passes a step: 5 ms of nothing
+    host = (P.encode(P.SaveRig(), 1) + idle + P.encode(P.HelloRequest(), 2) + P.encode(P.Arm(P.ArmMode.SWING_UP), 3)
+            + P.encode(P.Disarm(), 4) + P.encode(P.SaveRig(), 5) + idle + P.encode(P.HelloRequest(), 6))
+    frames, _, _ = run_board(harness, seconds=0.5, host=host, eeprom_fails=1)
+    acks = {f.msg.command_seq: f.msg.result for f in frames if f.type == P.MsgType.ACK}
+    assert acks[1] == P.AckResult.OK and acks[3] == P.AckResult.OK and acks[5] == P.AckResult.OK
+    hellos = [f.msg for f in frames if f.type == P.MsgType.HELLO]
+    assert not hellos[-2].rig & P.RigFlag.STORED and hellos[-1].rig & P.RigFlag.STORED  # the first did not store

@@ -41,9 +41,16 @@ uint8_t rod_control_arm(rod_control_t *c, uint8_t arm_mode)
         return ROD_ACK_BAD_STATE;
     }
     if (arm_mode == ROD_ARM_SWING_UP) {
-        c->mode = ROD_MODE_SWING_UP;
-        rod_swingup_init(&c->swing);
-        rod_runaway_start(&c->runaway, c->rate);
+        /* A rod being caught or balanced is not pumped: near upright the pump's torque would throw it (swing-up
+         * has no angle limit), and the catch after it would throw away the estimate and the trim mid-balance. */
+        if (c->mode == ROD_MODE_CATCH || c->mode == ROD_MODE_BALANCE) {
+            return ROD_ACK_BAD_STATE;
+        }
+        if (c->mode != ROD_MODE_SWING_UP) { /* a repeat changes nothing: the pump's stall watch goes on */
+            c->mode = ROD_MODE_SWING_UP;
+            rod_swingup_init(&c->swing);
+            rod_runaway_start(&c->runaway, c->rate);
+        }
     } else if (c->mode != ROD_MODE_BALANCE) {
         c->mode = ROD_MODE_CATCH;
     }

@@ -21,6 +21,7 @@ void rod_device_init(rod_device_t *dev)
     memset(dev->rig_kept, 0, sizeof dev->rig_kept);
     dev->save_wanted = false;
     dev->save_writing = false;
+    dev->save_failed = false;
 }
 
 void rod_device_load_rig(rod_device_t *dev, const uint8_t *stored, size_t n, rod_rig_t defaults)
@@ -48,7 +49,7 @@ static uint8_t rig_flags(const rod_device_t *dev)
     uint8_t now[ROD_RIG_STORE_SIZE];
     rod_rig_encode(&dev->control.settings.rig, now);
     uint8_t flags = (uint8_t)(rod_rig_sign_flags(&dev->control.settings.rig) | dev->rig_corrupt);
-    if (!rig_saving(dev) && memcmp(now, dev->rig_kept, sizeof now) == 0) {
+    if (!rig_saving(dev) && !dev->save_failed && memcmp(now, dev->rig_kept, sizeof now) == 0) {
         flags |= ROD_RIG_FLAG_STORED;
     }
     return flags;
@@ -74,9 +75,11 @@ bool rod_device_take_save(rod_device_t *dev, uint8_t out[ROD_RIG_STORE_SIZE])
 
 void rod_device_saved(rod_device_t *dev, bool ok)
 {
-    if (ok) {
-        dev->save_writing = false;
-    }
+    /* Ended either way: a write that failed must not hold ARM and IDENTIFY at BUSY until a power cycle; it only
+     * keeps STORED off, until a SAVE_RIG's write reads back. */
+    dev->save_failed = !ok;
+    __atomic_signal_fence(__ATOMIC_SEQ_CST); /* before writing falls: HELLO never sees STORED for a failed write */
+    dev->save_writing = false;
 }
 
 /* A numbered slot for the next frame; NULL (and one drop, one number used) when the ring is
@@ -130,7 +133,8 @@ static uint8_t apply_command(rod_device_t *dev, const rod_msg_command_t *cmd)
         memcpy(dev->rig_kept, dev->save_bytes, sizeof dev->rig_kept);
         dev->rig_corrupt = 0u;
         __atomic_signal_fence(__ATOMIC_SEQ_CST);
-        dev->save_wanted = true;
+        dev->save_wanted = true; /* STORED waits for this write, whatever the last one did */
+        dev->save_failed = false;
         return ROD_ACK_OK;
     case ROD_MSG_IDENTIFY: {
         if (rig_saving(dev)) {

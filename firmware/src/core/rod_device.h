@@ -42,6 +42,7 @@ typedef struct {
     uint8_t rig_kept[ROD_RIG_STORE_SIZE]; /* step only: the record in storage (rod_rig_encode), all 0 when none */
     volatile bool save_wanted; /* SAVE_RIG arrived; the main loop stores save_bytes */
     volatile bool save_writing; /* the main loop has taken save_bytes and not yet reported them written */
+    volatile bool save_failed;  /* the last write did not read back: the record kept is not what storage holds */
     uint8_t save_bytes[ROD_RIG_STORE_SIZE]; /* the rig settings as SAVE_RIG found them (rod_rig_encode) */
 } rod_device_t;
 

@@ -135,7 +135,7 @@ def run_console(args) -> int:
                 except UserError as e:
                     if not s.alive:  # the board is gone: said once, as rodctl's last line
                         raise UserError(str(e)) from None
-                    print(f"error: {str(e).replace(CLEAR_FAULT, CLEAR)}")
+                    print(f"error: {str(e).replace(CLEAR_FAULT, CLEAR).replace('(rodctl disarm)', '(type `disarm`)')}")
         except KeyboardInterrupt:
             print()
         finally:

@@ -59,8 +59,8 @@ REASON_TEXT = {
     P.Reason.RUNAWAY: "runaway: the base accelerated against the torque (a reversed encoder or motor: run `rodctl check`)",
     P.Reason.IMU: "the tip IMU was lost (no sample, a stuck one, or one at full scale)",
     P.Reason.UPLOAD: "restarting for an upload (the driver is off until the new firmware runs)",
-    P.Reason.RESET: "the board restarted from its watchdog, not from power-on: its encoder zero is where the rod "
-                    "was then (power it off and on with the rod hanging still)",
+    P.Reason.RESET: "the board restarted while running (its watchdog, a lockup or a brown-out), not from power-on: "
+                    "its encoder zero is where the rod was then (power it off and on with the rod hanging still)",
 }
 
 # the board's own faults (rod_device_board_fault): CLEAR_FAULT cannot leave them, only a restart

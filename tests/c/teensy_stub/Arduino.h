@@ -92,7 +92,12 @@ extern volatile uint16_t stub_reg16[64];
 #define RCM_SRS0_POR ((uint8_t)0x80)
 #define RCM_SRS0_PIN ((uint8_t)0x40)
 #define RCM_SRS0_WDOG ((uint8_t)0x20)
+#define RCM_SRS0_LOL ((uint8_t)0x08)
+#define RCM_SRS0_LOC ((uint8_t)0x04)
+#define RCM_SRS0_LVD ((uint8_t)0x02)
 #define RCM_SRS1 STUB_REG32(0x4007F204u)
+#define RCM_SRS1_SACKERR ((uint8_t)0x20)
+#define RCM_SRS1_SW ((uint8_t)0x04)
 #define RCM_SRS1_LOCKUP ((uint8_t)0x02)
 
 #define WDOG_STCTRLH STUB_REG16(0x40052000u)

@@ -46,8 +46,14 @@ extern "C" void eeprom_read_block(void *buf, const void *addr, uint32_t len)
 {
     memcpy(buf, eeprom + (uintptr_t)addr, len);
 }
+// HARNESS_EEPROM_FAILS=N: the first N writes change nothing (a worn cell), so they do not read back
+static long eeprom_fails = getenv("HARNESS_EEPROM_FAILS") ? atol(getenv("HARNESS_EEPROM_FAILS")) : 0;
 extern "C" void eeprom_write_block(const void *buf, void *addr, uint32_t len)
 {
+    if (eeprom_fails > 0) {
+        eeprom_fails--;
+        return;
+    }
     memcpy(eeprom + (uintptr_t)addr, buf, len);
 }
 

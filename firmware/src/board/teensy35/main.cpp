@@ -293,10 +293,14 @@ void setup()
                             rod_rig_defaults((int8_t)BOARD_ENCODER_SIGN, (int8_t)BOARD_MOTOR_DIR_SIGN));
     }
 
-    // The encoder's zero is the count at start-up, taken as hanging. After a power-on, a pin reset or
-    // an upload the rod hangs, the driver having been off; after the watchdog or a lockup it is
-    // wherever the run left it (upright, mid-swing), and every angle would be off by that much.
-    if ((RCM_SRS0 & RCM_SRS0_WDOG) || (RCM_SRS1 & RCM_SRS1_LOCKUP)) {
+    // The encoder's zero is the count at start-up, taken as hanging. After a power-on, a pin reset (the
+    // bootloader's, after an upload) or a debugger's the rod hangs, the driver having been off; after any
+    // restart of the running board it is wherever the run left it (upright, mid-swing), and every angle
+    // would be off by that much: the watchdog, a lockup, a software reset, a lost clock or PLL lock, a stop
+    // mode error, and a low-voltage reset without a power-on (the USB 5 V dipping as the motor starts).
+    if ((RCM_SRS0 & (RCM_SRS0_WDOG | RCM_SRS0_LOC | RCM_SRS0_LOL)) ||
+        ((RCM_SRS0 & RCM_SRS0_LVD) && !(RCM_SRS0 & RCM_SRS0_POR)) ||
+        (RCM_SRS1 & (RCM_SRS1_LOCKUP | RCM_SRS1_SW | RCM_SRS1_SACKERR))) {
         rod_device_board_fault(&device, ROD_REASON_RESET);
     }
 
