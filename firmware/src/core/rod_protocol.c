@@ -583,7 +583,7 @@ int rod_proto_decode_imu(const rod_packet_t *p, rod_msg_imu_t *m)
     m->gyro_bias = get_f32(q + ROD_IMU_OFF_GYRO_BIAS);
     m->encoder_offset = get_f32(q + ROD_IMU_OFF_ENCODER_OFFSET);
     m->status = q[ROD_IMU_OFF_STATUS];
-    m->bad_run = get_u16(q + ROD_IMU_OFF_BAD_RUN);
+    m->bad_run = (uint16_t)get_u16(q + ROD_IMU_OFF_BAD_RUN);
     return ROD_DECODE_OK;
 }
 
