@@ -47,6 +47,18 @@ def test_a_right_board_passes_every_step_and_writes_the_json(tmp_path):
     assert abs(data["results"][5]["values"]["trip_s"] - 0.5) <= 0.003
 
 
+def test_a_virtual_board_is_checked_against_its_own_file(tmp_path):
+    """`check --port sim://?params=FILE` failed identity against the default file (and judged the motor by its model),
+    where status and log on the same port name FILE as the board's design."""
+    from rodgains.params import load_params
+
+    f = tmp_path / "long.toml"
+    f.write_text(load_params(overrides=["rod.length=0.14"]).to_toml())
+    r, lines = check(f"sim://?params={f}", "--yes")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert lines["identity"].startswith("PASS") and lines["identity"].endswith(f"= the design of {f}")
+
+
 def test_a_rod_hanging_whole_turns_from_its_zero_still_passes():
     """After a swing-up that went over the top the rod hangs a whole turn (979.2 counts) from its boot zero, which
     the firmware's angle counts: the check failed it and told the user to reset the board."""

@@ -339,6 +339,12 @@ def test_a_run_the_board_trips_ends_there_with_exit_1_and_says_so(command, tmp_p
     assert err[-1].endswith(f"{out} keeps the run up to the trip")
     log = read_log(out)
     assert log.meta["end"] == "FAULT"
+    # the time the board's clock gives, not the host's to a USB batch ("0.1 s" for a 36 ms trip)
+    said = float(err[-1].split("tripped ")[1].split(" s after")[0])
+    ev = log.events
+    arm = next(t for t, name, info in zip(ev["time_s"], ev["event_name"], ev["info_text"]) if info.startswith("ACK ARM"))
+    fault = log.data["time_s"][log.data["mode_name"] == "FAULT"][0]
+    assert abs(said - (fault - arm)) <= 0.003, (said, fault - arm)
 
 
 def test_disarm_and_clear_fault_commands(capsys):

@@ -356,6 +356,33 @@ def test_identify_imu_measures_a_mounting_tilt_and_the_gyro_s_sense(tmp_path):
     assert "the same sense" in r.stdout and r.stdout.strip().endswith("IMU: PASS")
 
 
+def test_identify_imu_gives_the_tilt_to_set_with_what_the_firmware_already_turns_back(tmp_path):
+    """A firmware built with sensors.imu_tilt_deg = 1 turns 1 deg back before identify sees the samples: on a part
+    tilted 3 deg it measured 2 and said "set sensors.imu_tilt_deg = 2.00", which would lose the first degree."""
+    params = tmp_path / "imu.toml"
+    params.write_text(load_params(overrides=IMU + ["sensors.imu_tilt_deg=1"]).to_toml())
+    r = run_rodctl("identify", "--imu", "--yes", "--port", f"sim://?params={params}&imu_tilt_deg=2", timeout=300)
+    assert r.returncode == 0, r.stderr
+    line = next(ln for ln in r.stdout.splitlines() if "mounting tilt" in ln)
+    assert "(+2.00 left after the firmware's +1.00) (set sensors.imu_tilt_deg = 3.00)" in line, line
+
+
 def test_identify_imu_on_a_board_without_one_is_one_line(tmp_path):
     r = run_rodctl("identify", "--imu", "--yes", "--port", "sim://", timeout=300)
     assert r.returncode == 2 and "sensors.tip_imu" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_a_simulated_run_with_the_imu_logs_the_samples_its_steps_read(tmp_path):
+    """rodctl sim's log left the IMU columns empty (NaN, status -1) with the IMU on: it wrote no IMU frames."""
+    import pandas as pd
+
+    out = tmp_path / "imu.csv"
+    r = run_rodctl("sim", "--set", "sensors.tip_imu=true", "--scenario", "balance", "--duration", "1", "--no-plot",
+                   "--log", str(out))
+    assert r.returncode == 0, r.stderr
+    d = pd.read_csv(out)
+    fresh = d[d["imu_status_bits"] == int(P.ImuFlag.FRESH)]
+    assert len(fresh) >= len(d) - 1 and np.isfinite(fresh[["imu_gyro_rad_s", "imu_accel_x_m_s2",
+                                                            "imu_accel_y_m_s2"]].to_numpy()).all()
+    assert d["imu_gyro_bias_rad_s"].isna().all()  # the estimator's: a virtual board's log has it, a sim's does not
+    assert (np.diff(d["seq_count"]) == 2).all()  # an IMU frame after each telemetry frame, as on the board

@@ -168,7 +168,9 @@ def report_text(d: Design) -> str:
         f"  L = [{', '.join(f'{v:.4g}' for v in d.L.ravel())}]  rad, rad/s per rad of encoder innovation",
         f"  controller poles (slowest, as ln z / dt): {_poles(ctrl, d.dt)} rad/s",
         f"  observer poles   (slowest, as ln z / dt): {_poles(obs, d.dt)} rad/s",
-        f"  closed-loop spectral radius (plant + observer + LQR): {radius_text(d.checks['closed_loop_spectral_radius'], 6)}",
+        f"  closed-loop spectral radius (plant + observer + LQR): {radius_text(d.checks['closed_loop_spectral_radius'], 6)}"
+        + ("  (the gyro bias's estimate: a random walk with no dynamics of its own, held just inside the unit"
+           " circle by design)" if d.imu is not None else ""),
         # not the two lists above: the disturbance estimate's action closes a loop of its own (a slow integral mode)
         f"  closed-loop poles (slowest, as ln z / dt): {_poles(np.linalg.eigvals(d.loop()), d.dt)} rad/s",
         f"  stable for actuator gain in [{lo:.3g}, {hi:.3g}]; phase margin {pm:.1f} deg at the plant input"
@@ -183,7 +185,8 @@ def report_text(d: Design) -> str:
            f"(expect torque ripple at {ring_hz:.3g} Hz once balanced)" if ring_zeta < RINGING_DAMPING_RATIO else ""),
         *([] if d.imu is not None else
           [f"  encoder quantization drives {quantization_torque(d) * 1e3:.3g} mN m RMS of torque (linear, design model)"]),
-        f"  modal controllability {d.checks['controllability']:.2e}, observability {d.checks['observability']:.2e}",
+        f"  modal controllability {d.checks['controllability']:.2e}, observability from theta_1 alone "
+        f"{d.checks['observability']:.2e}" + (" (the tip IMU's, below)" if d.imu is not None else ""),
         "",
         f"The paper's continuous LQR (its weights, Sec. III) run sampled at {rate:g} Hz:",
         f"  K (bare rod) = [{', '.join(f'{v:.4g}' for v in bare['K'])}]",

@@ -11,16 +11,23 @@ from rodctl.cli.common import add_design_args, add_port_arg, session_for, stop_s
 from rodctl.cli.outputs import check_output
 
 
-def _design(args):
+def _design(args, session=None):
+    """(the design the board is checked against, its label, the flash command that gives a board that design): the
+    given --params/--set, else a virtual board's own file (sim://?params=FILE), else the default file."""
     from rodgains.params import DEFAULT_PARAMS, load_params
 
     from rodctl.paths import shown
 
-    params = load_params(args.params, args.overrides)
-    label = shown(args.params or DEFAULT_PARAMS)
-    over = "".join(f" --set {o}" for o in args.overrides)
-    flash = f"rodctl flash{f' --params {args.params}' if args.params else ''}{over}"
-    return params, label + over, flash
+    path, overrides = args.params, list(args.overrides)
+    dev = getattr(getattr(session, "ser", None), "device", None)
+    if path is None and not overrides and getattr(dev, "params", None) is not None:
+        path, overrides, params = getattr(dev, "params_path", None), list(getattr(dev, "overrides", ())), dev.params
+        path = None if path is None else str(path)
+    else:
+        params = load_params(path, overrides)
+    over = "".join(f" --set {o}" for o in overrides)
+    flash = f"rodctl flash{f' --params {shown(path)}' if path else ''}{over}"
+    return params, shown(path or DEFAULT_PARAMS) + over, flash
 
 
 def _fix(session, report, yes: bool) -> None:
@@ -53,11 +60,12 @@ def run_check_command(args) -> int:
 
     if args.json is not None:  # an empty name is refused, not taken for no record
         check_output(args.json, "--json", force=args.force)
-    params, label, flash = _design(args)
+    _design(args)  # a bad --params or --set is named before the board is opened
     say = lambda text: print(f"  {text}", file=sys.stderr, flush=True)  # noqa: E731
     show = lambda r: print(r.line(), flush=True)  # noqa: E731
     try:
         with stop_signals(), session_for(args) as s:
+            params, label, flash = _design(args, s)
             user = user_for(s, args.yes)
             if isinstance(user, VirtualHand):
                 say("sim://: the virtual board's hand turns the rod when a step asks for a hand")

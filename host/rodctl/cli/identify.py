@@ -130,10 +130,13 @@ def run_imu(args) -> int:
     if args.logs:
         raise InputError("--imu measures on the board: give --port, not LOG files")
 
+    from rodctl.link.design import design_params
+
     with session_for(args) as s:
+        params, _ = design_params(s, args)  # the tilt its firmware already turns back
         still, turn = measure(s, user_for(s, args.yes), _say)
     try:
-        cal = calibrate(still, turn)
+        cal = calibrate(still, turn, params["sensors"]["imu_tilt_deg"] if params is not None else None)
     except ValueError as e:
         raise InputError(str(e)) from None
     for line in cal.lines():

@@ -76,7 +76,7 @@ def stream(args, arm_mode=None, out: str | None = None, what: str = "log") -> in
     if a.error is not None:
         raise a.error
     if a.fault is not None:  # the run the board was armed for ended there: a failure on its own terms
-        raise UserError(f"the board tripped {a.fault_after_s:.1f} s after arming: {fault_text(a.fault.reason)}; "
+        raise UserError(f"the board tripped {a.fault_after_s:.3f} s after arming: {fault_text(a.fault.reason)}; "
                         "the driver is off" + (f"; {writer.path} keeps the run up to the trip" if writer else ""))
     if a.interrupted and session.hello is None:  # nothing armed or written yet
         print("rodctl: interrupted before the board answered; nothing was armed or written", file=sys.stderr,

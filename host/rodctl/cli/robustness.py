@@ -91,9 +91,9 @@ def table_lines(rows: list[dict]) -> list[str]:
                      f"{criterion('balance', strict=True)}; swing-up: {criterion('swingup', strict=True)}")
     if past or buckled_draws:
         which = f" ({', '.join(f'{name} {v:.3f} x' for name, v in past.items())})" if past else ""
-        lines.append("  ^ past the buckling length: the rod above the hub is longer than Greenhill's clamped length"
-                     + which + ", so it bends over whenever the shaft holds still "
-                     "(rodctl gains --report; docs/identification.md)")
+        lines.append("  ^ past the buckling length: the rod above the hub (and a tip IMU's mass on it) is longer than its "
+                     "clamped buckling length" + which + ", so it bends over whenever the shaft holds still "
+                     "(rodctl gains --report; docs/identification.md, with the IMU docs/sensors.md)")
     if bent:
         which = ", ".join(f"{name} {v:.2f} deg" for name, v in bent.items())
         lines.append(f"  ~ no shape within {ROBUST_BAND_DEG:g} deg of upright: a rod curved at rest whose straightest static "

@@ -29,8 +29,9 @@ class ImuCalibration:
     gyro_bias_rad_s: float
     gyro_noise_rad_s: float
     gravity_m_s2: float
-    tilt_deg: float
+    tilt_deg: float  # the part's tilt on the rod: what the firmware turns back plus what is left [deg]
     gyro_gain: float | None = None  # the gyro's angle over the encoder's during the hand's turn (None: not measured)
+    firmware_tilt_deg: float | None = 0.0  # what the firmware already turns back (None: its parameters unknown)
     problems: list[str] = field(default_factory=list)  # one line each: what is wrong and the fix
 
     @property
@@ -38,10 +39,19 @@ class ImuCalibration:
         return not self.problems
 
     def lines(self) -> list[str]:
+        fw = self.firmware_tilt_deg
+        if fw is None:
+            tilt = (f"mounting tilt {self.tilt_deg:+.2f} deg beyond what the firmware turns back (its parameters are "
+                    "not known here: pass --params FILE to be told the value to set)")
+        elif abs(self.tilt_deg) > TILT_LIMIT_DEG:
+            tilt = f"mounting tilt {self.tilt_deg:+.2f} deg"
+        else:
+            tilt = (f"mounting tilt {self.tilt_deg:+.2f} deg"
+                    + (f" ({self.tilt_deg - fw:+.2f} left after the firmware's {fw:+.2f})" if fw else "")
+                    + f" (set sensors.imu_tilt_deg = {self.tilt_deg:.2f})")
         out = [f"gyro bias {math.degrees(self.gyro_bias_rad_s):+.3f} dps ({self.gyro_bias_rad_s * 1e3:+.2f} mrad/s), "
                f"noise {self.gyro_noise_rad_s * 1e3:.2f} mrad/s RMS at rest",
-               f"gravity {self.gravity_m_s2:.3f} m/s^2, mounting tilt {self.tilt_deg:+.2f} deg "
-               f"(set sensors.imu_tilt_deg = {self.tilt_deg:.2f})"]
+               f"gravity {self.gravity_m_s2:.3f} m/s^2, {tilt}"]
         if self.gyro_gain is not None:
             out.append(f"during the hand's turn the gyro's angle is {self.gyro_gain:+.2f} x the encoder's "
                        "(the same sense; a soft rod's tip droops behind its hub)")
@@ -51,17 +61,18 @@ class ImuCalibration:
         return out
 
 
-def calibrate(still: dict, turn: dict | None = None) -> ImuCalibration:
-    """still: arrays gyro, accel_x, accel_y (rod frame) with the rod hanging at rest; turn: arrays gyro and
-    base_rate (the encoder's) while a hand turns the rod slowly, or None."""
+def calibrate(still: dict, turn: dict | None = None, firmware_tilt_deg: float | None = 0.0) -> ImuCalibration:
+    """still: arrays gyro, accel_x, accel_y (rod frame, as the firmware gives them: its sensors.imu_tilt_deg,
+    firmware_tilt_deg [deg], already turned back; None: not known) with the rod hanging at rest; turn: arrays gyro
+    and base_rate (the encoder's) while a hand turns the rod slowly, or None."""
     g, ax, ay = (np.asarray(still[k], float) for k in ("gyro", "accel_x", "accel_y"))
     if g.size < 50:
         raise ValueError(f"only {g.size} IMU samples at rest: is the firmware built with sensors.tip_imu?")
     bias, noise = float(np.mean(g)), float(np.std(g))
     mx, my = float(np.mean(ax)), float(np.mean(ay))
     grav = math.hypot(mx, my)
-    tilt = math.degrees(math.atan2(my, -mx))
-    cal = ImuCalibration(bias, noise, grav, tilt)
+    tilt = math.degrees(math.atan2(my, -mx)) + (firmware_tilt_deg or 0.0)
+    cal = ImuCalibration(bias, noise, grav, tilt, firmware_tilt_deg=firmware_tilt_deg)
     p = cal.problems
     if abs(grav - G) > GRAVITY_TOLERANCE * G:
         p.append(f"the accelerometer reads {grav:.2f} m/s^2 hanging, not {G:.2f}: check its full scale "

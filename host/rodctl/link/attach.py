@@ -63,7 +63,7 @@ class Attached:
     error: BaseException | None = None
     mismatch: str | None = None  # --params / --set named a design the board does not run (design_mismatch)
     fault: object | None = None  # the first FAULT telemetry of an armed run (it ends the attach: ended "FAULT")
-    fault_after_s: float = 0.0  # how long after the ARM's ACK it was seen [s]
+    fault_after_s: float = 0.0  # the board's time from the ARM to the first FAULT frame seen (to a frame) [s]
 
     @property
     def interrupted(self) -> bool:
@@ -109,6 +109,14 @@ def attach(session: Session, design_args=None, *, out: str | None = None, fmt: s
         if arm_mode is not None:
             if interrupted():
                 raise KeyboardInterrupt
+            clock: dict = {}  # the board's clock [us] at the ARM's ACK and the first FAULT frame after it
+
+            def stamp(f, _t) -> None:
+                if f.type == P.MsgType.ACK and f.msg.command == P.MsgType.ARM and f.msg.result == P.AckResult.OK:
+                    clock["arm"] = f.time_us
+                elif f.type == P.MsgType.TELEMETRY and f.msg.mode == P.Mode.FAULT and "arm" in clock:
+                    clock.setdefault("fault", f.time_us)
+            session.add_listener(stamp, replay=False)
             armed(session.arm(arm_mode))
             armed_at, armed_seen = time.monotonic(), session.telemetry_seen
         t_end = None if duration_s is None else time.monotonic() + duration_s
@@ -123,7 +131,10 @@ def attach(session: Session, design_args=None, *, out: str | None = None, fmt: s
             tick(a)
             t = session.telemetry
             if arm_mode is not None and session.telemetry_seen > armed_seen and t is not None and t.mode == P.Mode.FAULT:
-                a.ended, a.fault, a.fault_after_s = "FAULT", t, time.monotonic() - armed_at
+                a.ended, a.fault = "FAULT", t
+                # the board's clock: the host's sees the frames in USB batches, at its own 50 ms polls
+                a.fault_after_s = (((clock["fault"] - clock["arm"]) & 0xFFFFFFFF) * 1e-6 if "fault" in clock
+                                   else time.monotonic() - armed_at)
                 break
     except KeyboardInterrupt as e:
         a.ended = stopped_by(e)

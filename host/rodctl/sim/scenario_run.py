@@ -26,8 +26,13 @@ def check_new_log(log: Path) -> None:
     check_new(log, also=(truth_name(log),))
 
 
+_NAN = float("nan")
+
+
 def write_log(o, trace, path: Path) -> tuple[Path, Path]:
-    """The trace in the device log format (rodctl.logs.LogWriter), plus the true state beside it."""
+    """The trace in the device log format (rodctl.logs.LogWriter), plus the true state beside it. With the tip IMU
+    its columns hold the sample each step read; the estimator's gyro bias and encoder offset are NaN (a virtual
+    board's log, `rodctl log --port sim://?params=...`, has them)."""
     from rodctl import logs as logfile
     from rodctl.logs.writer import LogWriteFailed, files_of
     from rodctl.link import protocol as P
@@ -49,6 +54,8 @@ def write_log(o, trace, path: Path) -> tuple[Path, Path]:
         torque = trace.torque_cmd if trace.torque_cmd is not None else trace.torque
         # the board's f32, as its telemetry carries them: every log format then holds the same values
         est, duty, torque = (np.asarray(a, np.float32).astype(float) for a in (est, duty, torque))
+        imu = None if trace.imu is None else np.asarray(trace.imu, np.float32).astype(float)
+        step = 1 if imu is None else 2  # a board with the IMU sends an IMU frame after each telemetry frame
         for k in range(len(trace.t)):
             m = int(mode[k])
             reason = trace.reason if m == 3 else 0
@@ -56,7 +63,12 @@ def write_log(o, trace, path: Path) -> tuple[Path, Path]:
             msg = P.Telemetry(m, reason, (1 if enabled else 0) | 4, n, int(count[k]), float(est[k, n]),
                               float(torque[k]), float(duty[k]), 0, 0, 0, 0,
                               tuple(est[k, :n].tolist()), tuple(est[k, n:].tolist()))
-            w.write_telemetry(msg, seq=k, time_us=(k * period_us) & 0xFFFFFFFF, host_time_s=float(trace.t[k]))
+            time_us = (k * period_us) & 0xFFFFFFFF
+            w.write_telemetry(msg, seq=step * k, time_us=time_us, host_time_s=float(trace.t[k]))
+            if imu is not None:  # the sample the step read; the estimator's bias and offset are the board's alone
+                fresh = bool(np.isfinite(imu[k]).all())
+                w.write_imu(P.Imu(*imu[k].tolist(), _NAN, _NAN, int(P.ImuFlag.FRESH) if fresh else 0,
+                                  0 if fresh else 1), seq=step * k + 1, time_us=time_us, host_time_s=float(trace.t[k]))
         w.close()
         truth = truth_name(path)
         written.append(truth)

@@ -57,6 +57,7 @@ class Trace:
     caught_at: float | None = None
     node_arc: np.ndarray | None = None  # arc length of the plant's nodes [m] (None: N equal edges)
     plant: str = ""  # which plant ran
+    imu: np.ndarray | None = None  # (T, 3) the tip IMU's sample each step read: gyro [rad/s], accel x, y [m/s^2]
 
     @property
     def deviation_deg(self) -> np.ndarray:
@@ -213,7 +214,13 @@ def firmware_run(label: str, design: Params, plant: Params, *, theta0, arm_mode:
                  mode=mode, duty=log["duty"], count=log["count"], torque_cmd=log["torque_cmd"],
                  reason=int(ctl.lib.rod_sil_reason()) if hasattr(ctl.lib, "rod_sil_reason") else 0,
                  start=start, caught_at=caught_at if arm_mode == 2 else None, node_arc=pl.node_arc(),
-                 plant=plant_label(pl))
+                 plant=plant_label(pl), imu=_imu_samples(log))
+
+
+def _imu_samples(log: dict) -> np.ndarray | None:
+    """The run's IMU samples (run_closed_loop's "imu"), or None for a run without a tip IMU (all NaN)."""
+    imu = log.get("imu")
+    return None if imu is None or not np.isfinite(imu).any() else imu.astype(float)
 
 
 def plant_label(pl) -> str:
@@ -230,7 +237,7 @@ def trace_from_log(label: str, log: dict, task: str) -> Trace:
                  est=log["est"].astype(float), mode=mode, duty=log["duty"], count=log["count"],
                  torque_cmd=log["torque_cmd"], reason=log["reason"],
                  start=caught_at if caught_at is not None else 0.0, caught_at=caught_at, node_arc=arc,
-                 plant=log["plant_label"])
+                 plant=log["plant_label"], imu=_imu_samples(log))
 
 
 def state_feedback_run(label: str, p: Params, *, theta0, seconds: float, law: str, progress=None) -> Trace:
