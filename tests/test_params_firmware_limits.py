@@ -79,7 +79,7 @@ def test_gains_with_a_low_current_limit_is_one_line_exit_2_and_writes_nothing(tm
     assert r.stderr.strip().splitlines() == [
         "rodctl: swing_up.amplitude: must be in [0.001, 0.03574] N m, the firmware's torque ceiling "
         "(set by driver.current_limit 0.3 A x the motor's torque at the output, motor.gear_ratio 20.4 x "
-        "torque_constant 0.01123 x gearbox_efficiency 0.52), got 0.05"]
+        "torque_constant 0.01123 x gearbox_efficiency 0.52), got 0.05 (with --set driver.current_limit=0.3)"]
     assert not header.exists()
 
 
