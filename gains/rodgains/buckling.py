@@ -79,15 +79,16 @@ def _gravity_margin(above_hub_m: float, mass_per_m: float, EI: float, g: float,
     return float(lam * EI / (rod.m * g * l**2))
 
 
-def _ratio(p: Params, density_scale: float = 1.0, length_m: float | None = None) -> float:
-    """clamped_ratio of p's rod with its density scaled and its whole length (hub included) length_m [m]."""
+def _ratio(p: Params, density_scale: float = 1.0, length_m: float | None = None, imu: bool | None = None) -> float:
+    """clamped_ratio of p's rod with its density scaled and its whole length (hub included) length_m [m]; imu: with
+    the tip IMU's mass (None: as p says)."""
     r = p["rod"]
     lc = greenhill_length(p)
     if not math.isfinite(lc):
         return 0.0
     above = (r["length"] if length_m is None else length_m) - p["plant"]["hub_length"]
     ratio = above / (lc * density_scale ** (-1.0 / 3.0))  # Greenhill's length goes as rho^(-1/3)
-    if not p["sensors"]["tip_imu"]:
+    if not (p["sensors"]["tip_imu"] if imu is None else imu):
         return ratio
     q = r["density"] * density_scale * r["width"] * r["thickness"]
     imu = (p["sensors"]["imu_from_tip"], p["sensors"]["imu_mass"])
@@ -101,7 +102,7 @@ def _ratio(p: Params, density_scale: float = 1.0, length_m: float | None = None)
 def tip_mass_factor(p: Params) -> float:
     """The rod's clamped buckling length without the tip IMU over that with its mass on it [-]: 1 without the IMU
     (sensors.tip_imu false); Table I's rod with the default 2 g at its tip 1.020."""
-    bare = _ratio(p.with_overrides("sensors.tip_imu=false")) if p["sensors"]["tip_imu"] else 0.0
+    bare = _ratio(p, imu=False) if p["sensors"]["tip_imu"] else 0.0
     return _ratio(p) / bare if bare > 0.0 else 1.0
 
 
@@ -129,7 +130,7 @@ def buckling_margins(p: Params) -> dict[str, float]:
     if not p["sensors"]["tip_imu"]:
         critical = (length - hub) / r  # Greenhill's length, from the ratio
         return {"youngs_modulus": r**3 - 1.0, "density": r**-3 - 1.0, "length": (critical + hub) / length - 1.0}
-    bare = _ratio(p.with_overrides("sensors.tip_imu=false"))  # the IMU's mass can only add to the load
+    bare = _ratio(p, imu=False)  # the IMU's mass can only add to the load
 
     def solved(f, lo: float, hi: float) -> float:
         return float(brentq(lambda x: f(x) - 1.0, lo, hi, xtol=1e-7)) if f(lo) < 1.0 <= f(hi) else math.nan

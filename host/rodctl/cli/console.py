@@ -20,6 +20,12 @@ from rodctl.logs.schema import from_upright_deg
 
 
 CLEAR = "type `clear`"  # the console's words for CLEAR_FAULT
+
+
+def in_console_words(text: str) -> str:
+    """A message that names rodctl's commands, said as this prompt's: clear and disarm are typed here."""
+    return text.replace(CLEAR_FAULT, CLEAR).replace("(rodctl disarm)", "(type `disarm`)")
+
 # commands that take nothing after them; disarm and quit act whatever follows (a word more must not keep a motor on)
 BARE_COMMANDS = ("help", "?", "clear", "clear-fault", "status")
 
@@ -128,14 +134,15 @@ def run_console(args) -> int:
                         print(f"mode {mode_text(P.Mode[r['mode']], P.Reason[r['reason']], CLEAR)}; theta_hat [{th}] deg from upright; "
                               f"torque {r['torque_Nm']:.3g} N m; duty {r['duty']:.3g}")
                         print(f"settings: {st}")
-                        print(f"firmware {r['firmware_version']}, N={r['n']}, {r['rate_hz']:g} Hz, parameters "
-                              f"{r['params_source']}; {status_text(s, 0).split(' | ', 2)[2]}".replace(CLEAR_FAULT, CLEAR))
+                        print(in_console_words(f"firmware {r['firmware_version']}, N={r['n']}, {r['rate_hz']:g} Hz, "
+                                               f"parameters {r['params_source']}; "
+                                               f"{status_text(s, 0).split(' | ', 2)[2]}"))
                     else:
                         raise UserError(f"unknown command {cmd!r}; 'help' lists them")
                 except UserError as e:
                     if not s.alive:  # the board is gone: said once, as rodctl's last line
                         raise UserError(str(e)) from None
-                    print(f"error: {str(e).replace(CLEAR_FAULT, CLEAR).replace('(rodctl disarm)', '(type `disarm`)')}")
+                    print(f"error: {in_console_words(str(e))}")
         except KeyboardInterrupt:
             print()
         finally:

@@ -29,6 +29,11 @@ from rodctl.link.session import is_tty
 BACK_ON_USB_S = 10.0  # how long a flashed board may take to come back on USB [s]
 
 
+def project_header(project: Path) -> Path:
+    """The gains header a PlatformIO project builds from (its platformio.ini's include folder)."""
+    return project / "firmware" / "include" / "rod_gains.h"
+
+
 def check_upload_port(port: str) -> None:
     """InputError unless `port` can be a Teensy's serial port: an existing device, not a URL (the virtual board runs
     this checkout's core and takes no firmware)."""
@@ -47,7 +52,7 @@ def ensure_header(args, project: Path) -> None:
 
     print("checking the gains header against the parameters (designing) ...", file=sys.stderr, flush=True)
     t = time.monotonic()
-    header = project / "firmware" / "include" / "rod_gains.h"  # where platformio.ini's project builds it from
+    header = project_header(project)
     d, files = gains_header.generated_files(args.params, args.overrides,
                                             None if header.resolve() == paths.COMMITTED_HEADER.resolve() else str(header),
                                             progress=robust_progress)
@@ -107,7 +112,7 @@ def run(args, upload: bool) -> int:
     project = Path(args.project_dir) if args.project_dir is not None else paths.REPO
     if upload and args.port is not None:
         check_upload_port(args.port)
-    header = project / "firmware" / "include" / "rod_gains.h"  # where platformio.ini's project builds it from
+    header = project_header(project)
     for f in (header, header.with_suffix(".toml")):  # a hand-written header is the user's, as for rodctl gains
         check_regenerable(f, "the project's", force=args.force, inputs=(args.params,))
     platform = platformio.env_platform(project, args.env)

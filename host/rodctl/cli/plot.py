@@ -60,9 +60,7 @@ def run_plot(args) -> int:
         check_output(args.out, "--out", figure=True, force=args.force)
     elif display_problem() is not None:  # LOG.png beside the log: checked before reading it
         check_output(default_figure(args.log), "figure (no --out, no display)", figure=True)
-    from rodctl.logs.reader import cut_short
-
-    from rodctl.logs.reader import reading_note
+    from rodctl.logs.reader import cut_short, reading_note
 
     note = reading_note(args.log)  # seconds of silence else
     if note:

@@ -92,7 +92,8 @@ def run_scope(args) -> int:
         out = getattr(args, "record", None) or f"run.{getattr(args, 'format', None) or 'csv'}"
         raise UserError(f"the scope needs a display: {why}. Record instead with `{log_instead(args, out)}`, then "
                         f"`rodctl plot {shlex.quote(out)} --out {shlex.quote(default_figure(out))}`")
-    from rodctl.scope.loop import close_scope, open_scope, run_window, shot_saved
+    from rodctl.scope import display_guard
+    from rodctl.scope.loop import close_scope, end_on_lost_display, open_scope, run_window, shot_saved
 
     stop = threading.Event()
     old = {}
@@ -110,25 +111,7 @@ def run_scope(args) -> int:
         scope = None
 
         def display_lost(why: str) -> None:  # Xlib ends the process after this: no finally below runs
-            kept = ""
-            try:
-                s.disarm()  # first: a recording's last flush to a slow disk must not keep the motor on
-            except Exception:  # noqa: BLE001 - the close below tries again; then the watchdog disarms, as said
-                pass
-            try:
-                if scope is not None:
-                    scope.finish()  # the recording closed; no figure call: the display is gone
-                    kept = f"; recorded {', '.join(scope.recorded)}" if scope.recorded else ""
-            except Exception:  # noqa: BLE001 - the board is disarmed; the line below says what was kept
-                pass
-            try:
-                s.close()  # DISARM again, and its acknowledgement
-            except Exception:  # noqa: BLE001 - then the watchdog disarms, as said
-                pass
-            state = "disarmed" if s.disarm_acked else "disarm not confirmed (the watchdog disarms)"
-            print(f"rodctl: {why}: {state}{kept}", file=sys.stderr, flush=True)
-
-        from rodctl.scope import display_guard
+            print(f"rodctl: {why}: {end_on_lost_display(s, scope)}", file=sys.stderr, flush=True)
 
         try:
             display_guard.install(display_lost)

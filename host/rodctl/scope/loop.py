@@ -130,6 +130,28 @@ def close_scope(scope: Scope | None, failures: list) -> None:
             failures.append(e)
 
 
+def end_on_lost_display(session, scope: Scope | None) -> str:
+    """What the scope does when its display is gone (rodctl.scope.display_guard, before Xlib ends the process): the
+    board disarmed first, then the recording closed (no figure call: the display is gone), then the session;
+    returns what to say ("disarmed; recorded run.csv"). Never raises."""
+    kept = ""
+    try:
+        session.disarm()  # first: a recording's last flush to a slow disk must not keep the motor on
+    except Exception:  # noqa: BLE001 - the close below tries again; then the watchdog disarms, as said
+        pass
+    try:
+        if scope is not None:
+            scope.finish()
+            kept = f"; recorded {', '.join(scope.recorded)}" if scope.recorded else ""
+    except Exception:  # noqa: BLE001 - the board is disarmed; what was kept is said
+        pass
+    try:
+        session.close()  # DISARM again, and its acknowledgement
+    except Exception:  # noqa: BLE001 - then the watchdog disarms, as said
+        pass
+    return ("disarmed" if session.disarm_acked else "disarm not confirmed (the watchdog disarms)") + kept
+
+
 def shot_saved(path: str, failures: list) -> bool:
     """Whether the screenshot at `path` was saved (it is there, and saving it did not fail)."""
     return Path(path).is_file() and not any(str(f).startswith("--screenshot ") for f in failures)
